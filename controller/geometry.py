@@ -1,0 +1,150 @@
+"""Plane geometry shared by detection, reference, metrics and the LiDAR simulator.
+
+Conventions: points are (x north, y east) in metres; angles are measured from north (x),
+clockwise positive toward east (y), like the heading psi. All functions are pure and
+vectorised over numpy arrays.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def wrap_angle(angle):
+    """Wrap to [-pi, pi) (Fossen's `ssa`)."""
+    return (np.asarray(angle) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def unwrap_near(angle, reference):
+    """The angle equal to `angle` modulo 2 pi that lies closest to `reference`."""
+    return reference + wrap_angle(np.asarray(angle) - reference)
+
+
+@dataclass(frozen=True)
+class Segment:
+    """A line segment L = (x_c, y_c, theta, length) as in the paper's eq. line."""
+
+    x_c: float
+    y_c: float
+    theta: float  # rad, direction of the segment, from north clockwise
+    length: float  # m
+
+    @property
+    def endpoints(self) -> tuple[np.ndarray, np.ndarray]:
+        d = 0.5 * self.length * np.array([np.cos(self.theta), np.sin(self.theta)])
+        c = np.array([self.x_c, self.y_c])
+        return c - d, c + d
+
+    @classmethod
+    def from_endpoints(cls, a, b) -> "Segment":
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        d = b - a
+        return cls(
+            float((a[0] + b[0]) / 2), float((a[1] + b[1]) / 2),
+            float(np.arctan2(d[1], d[0])), float(np.hypot(d[0], d[1])),
+        )
+
+    def as_array(self) -> np.ndarray:
+        return np.array([self.x_c, self.y_c, self.theta, self.length])
+
+
+def segments_to_endpoints(segments) -> tuple[np.ndarray, np.ndarray]:
+    """(M, 4) array of (x_c, y_c, theta, length) -> two (M, 2) arrays of endpoints."""
+    s = np.asarray(segments, float).reshape(-1, 4)
+    half = 0.5 * s[:, 3:4] * np.column_stack([np.cos(s[:, 2]), np.sin(s[:, 2])])
+    return s[:, :2] - half, s[:, :2] + half
+
+
+def point_segment_distance(points, a, b) -> np.ndarray:
+    """Distance from each of N points to each of M segments a-b: an (N, M) array."""
+    p = np.asarray(points, float).reshape(-1, 2)[:, None, :]
+    a = np.asarray(a, float).reshape(-1, 2)[None, :, :]
+    b = np.asarray(b, float).reshape(-1, 2)[None, :, :]
+    ab = b - a
+    denom = np.einsum("ijk,ijk->ij", ab, ab)
+    t = np.einsum("ijk,ijk->ij", p - a, ab) / np.where(denom > 0, denom, 1.0)
+    t = np.clip(t, 0.0, 1.0)
+    closest = a + t[..., None] * ab
+    return np.linalg.norm(p - closest, axis=-1)
+
+
+def polyline_segments(polyline) -> tuple[np.ndarray, np.ndarray]:
+    """The consecutive segments of an (K, 2) polyline as endpoint arrays a, b of shape (K-1, 2)."""
+    pts = np.asarray(polyline, float).reshape(-1, 2)
+    return pts[:-1], pts[1:]
+
+
+def distance_to_polylines(points, polylines) -> np.ndarray:
+    """Smallest distance from each point to any of the polylines: shape (N,)."""
+    points = np.asarray(points, float).reshape(-1, 2)
+    best = np.full(len(points), np.inf)
+    for line in polylines:
+        a, b = polyline_segments(line)
+        if len(a):
+            best = np.minimum(best, point_segment_distance(points, a, b).min(axis=1))
+    return best
+
+
+@dataclass(frozen=True)
+class Polyline:
+    """A path through waypoints with arc-length bookkeeping (for references and cross-track)."""
+
+    points: np.ndarray  # (K, 2)
+
+    def __post_init__(self) -> None:
+        pts = np.asarray(self.points, float).reshape(-1, 2)
+        object.__setattr__(self, "points", pts)
+
+    @property
+    def seg_lengths(self) -> np.ndarray:
+        return np.hypot(*np.diff(self.points, axis=0).T)
+
+    @property
+    def cumulative(self) -> np.ndarray:
+        """Arc length at each vertex, starting at 0."""
+        return np.concatenate([[0.0], np.cumsum(self.seg_lengths)])
+
+    @property
+    def length(self) -> float:
+        return float(self.seg_lengths.sum())
+
+    @property
+    def headings(self) -> np.ndarray:
+        """Direction of each leg (rad, from north clockwise)."""
+        d = np.diff(self.points, axis=0)
+        return np.arctan2(d[:, 1], d[:, 0])
+
+    def project(self, point, s_min: float = 0.0, s_max: float | None = None):
+        """Closest point on the polyline with arc length in [s_min, s_max].
+
+        Returns (s, closest_xy, distance, leg_index). Searching from a previous progress
+        `s_min` keeps a path that doubles back (an S-bend) from jumping backwards.
+        """
+        p = np.asarray(point, float).reshape(2)
+        cum = self.cumulative
+        s_max = cum[-1] if s_max is None else min(s_max, cum[-1])
+        a, ab, L = self.points[:-1], np.diff(self.points, axis=0), self.seg_lengths
+        t = np.einsum("ij,ij->i", p - a, ab) / np.where(L > 0, L * L, 1.0)
+        lo, hi = np.maximum(cum[:-1], s_min), np.minimum(cum[1:], s_max)
+        s = np.clip(cum[:-1] + np.clip(t, 0.0, 1.0) * L, lo, np.maximum(lo, hi))
+        xy = self.at(s)[0]
+        d = np.where(lo <= hi, np.hypot(*(xy - p).T), np.inf)
+        i = int(np.argmin(d))
+        return float(s[i]), xy[i], float(d[i]), i
+
+    def at(self, s):
+        """Point(s) and leg heading(s) at arc length(s) s (clamped to the ends)."""
+        s = np.atleast_1d(np.asarray(s, float))
+        cum = self.cumulative
+        s = np.clip(s, 0.0, cum[-1])
+        i = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(self.points) - 2)
+        L = self.seg_lengths[i]
+        t = np.where(L > 0, (s - cum[i]) / np.where(L > 0, L, 1.0), 0.0)
+        xy = self.points[i] + t[:, None] * (self.points[i + 1] - self.points[i])
+        return xy, self.headings[i]
+
+    def cross_track(self, point) -> float:
+        """Unsigned distance from a point to the polyline."""
+        return float(self.project(point)[2])

@@ -1,0 +1,1 @@
+"""Canal scenarios: the world, simulated sensors, the closed loop, metrics and plots."""

@@ -1,0 +1,1 @@
+"""Shared test settings: every test runs offline and seeded."""

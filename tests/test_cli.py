@@ -1,0 +1,47 @@
+"""The `canalnav` entry point: subcommands, errors as one line, README and CI in step."""
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+from bridge.main import build_parser, main
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_help_lists_subcommands(capsys):
+    parser = build_parser()
+    text = parser.format_help()
+    for name in ("bench", "params"):
+        assert name in text
+
+
+def test_params_round_trips_through_the_cli(tmp_path, capsys):
+    out = tmp_path / "p.toml"
+    assert main(["params", "-o", str(out)]) == 0
+    assert main(["params", "--from", str(out)]) == 0
+    assert "m11 = 1914.9" in capsys.readouterr().out
+
+
+def test_bad_input_is_one_line_and_status_2(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[boat]\nm11 = -1\n")
+    assert main(["params", "--from", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and str(bad) in err and "'m11'" in err
+
+
+def test_console_script_runs():
+    exe = Path(sys.executable).with_name("canalnav")
+    result = subprocess.run([str(exe), "--help"], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0 and "canalnav" in result.stdout
+
+
+def test_ci_runs_the_readme_test_command():
+    readme = (ROOT / "README.md").read_text()
+    ci = (ROOT / ".ci" / "run").read_text()
+    command = ci.strip().splitlines()[-1]
+    assert command in readme, "the README's test command and .ci/run must stay the same"
+    blocks = re.findall(r"```(?:sh|bash)?\n(.*?)```", readme, re.S)
+    assert command in blocks[1], "the test command is the README's second command"
