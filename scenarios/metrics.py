@@ -1,0 +1,68 @@
+"""The paper's metrics (§IV, DESIGN.md Metrics), as pure functions over a run's arrays.
+
+Clearance is ground truth: distances from the hull circles' centres to the true walls and
+obstacles, never to detections.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from controller.geometry import Polyline, distance_to_polylines
+
+HULL_CIRCLE_OFFSETS_M = (2.0, -2.0)
+"""Centres of the two hull circles along body x (bow p_b, stern p_s), as in the paper."""
+
+
+def hull_circle_centres(poses, offsets=HULL_CIRCLE_OFFSETS_M) -> np.ndarray:
+    """Centres (N, len(offsets), 2) of the hull circles for poses (N, 3+) of x, y, psi."""
+    poses = np.asarray(poses, float).reshape(-1, np.shape(poses)[-1])
+    off = np.asarray(offsets, float)
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    return np.stack([poses[:, 0:1] + off * c[:, None], poses[:, 1:2] + off * s[:, None]], axis=-1)
+
+
+def clearance(poses, outlines, offsets=HULL_CIRCLE_OFFSETS_M) -> np.ndarray:
+    """Distance (N, n_circles) from each hull circle centre to the nearest true outline."""
+    centres = hull_circle_centres(poses, offsets)
+    n, k = centres.shape[:2]
+    return distance_to_polylines(centres.reshape(-1, 2), outlines).reshape(n, k)
+
+
+def time_below(values, threshold: float, dt: float) -> float:
+    """Seconds during which `values` (one per step of dt) lie below `threshold`."""
+    return float(np.count_nonzero(np.asarray(values) < threshold) * dt)
+
+
+def command_rates(commands, dt: float, initial=(0.0, 0.0)) -> np.ndarray:
+    """Applied command rates (%/s) from the commands (N, 2) sent every dt seconds."""
+    cmds = np.asarray(commands, float).reshape(-1, 2)
+    prev = np.vstack([np.asarray(initial, float).reshape(1, 2), cmds[:-1]])
+    return (cmds - prev) / dt
+
+
+def control_effort(rates, weights=(1.0, 1.0)) -> float:
+    """J_c = sum_i u_i' R u_i with u the command rates in %/s and R = diag(weights)."""
+    rates = np.asarray(rates, float).reshape(-1, 2)
+    return float(np.sum(rates**2 * np.asarray(weights, float)))
+
+
+def cross_track(positions, path: Polyline) -> np.ndarray:
+    """Unsigned distance from each position (N, 2) to the waypoint path."""
+    return np.array([path.cross_track(p) for p in np.asarray(positions, float).reshape(-1, 2)])
+
+
+@dataclass(frozen=True)
+class TimingStats:
+    mean_ms: float
+    p99_ms: float
+    max_ms: float
+
+    @classmethod
+    def of(cls, seconds) -> "TimingStats":
+        ms = np.asarray(seconds, float) * 1e3
+        if ms.size == 0:
+            return cls(0.0, 0.0, 0.0)
+        return cls(float(ms.mean()), float(np.percentile(ms, 99)), float(ms.max()))
