@@ -17,10 +17,10 @@ def test_clearance_to_two_walls():
     walls = [np.array([[-100, -6.0], [100, -6.0]]), np.array([[-100, 4.0], [100, 4.0]])]
     # heading north along the canal at y = 1: 7 m to the west wall, 3 m to the east wall
     d = metrics.clearance([[0, 1.0, 0.0]], walls)
-    assert d == pytest.approx([[3.0, 3.0]])
+    assert d == pytest.approx(np.array([[3.0, 3.0]]))
     # turned east: the bow circle is 1 m from the east wall, the stern 5 m from the west wall
     d = metrics.clearance([[0, 1.0, np.pi / 2]], walls)
-    assert d == pytest.approx([[1.0, 5.0]])
+    assert d == pytest.approx(np.array([[1.0, 5.0]]))
 
 
 def test_time_below_counts_steps():
