@@ -1,0 +1,77 @@
+"""The closed loop with the Python-model plant and the LOS-PID tracker on a straight canal."""
+
+import json
+
+import numpy as np
+import pytest
+
+from controller.params import IDENTIFIED
+from scenarios.closed_loop import Decision, LoopConfig, run_closed_loop
+from scenarios.controllers import LosPidController
+from scenarios.plant import ModelPlant
+
+WALLS = (np.array([[-10.0, -8.0], [300.0, -8.0]]), np.array([[-10.0, 8.0], [300.0, 8.0]]))
+WAYPOINTS = np.array([[0.0, 0.0], [100.0, 0.0], [200.0, 2.0]])
+
+
+class NoPerception:
+    def segments(self, t, true_state, est_state):
+        return np.empty((0, 4))
+
+
+def run(tmp_path, seed=1, controller=None, duration=200.0):
+    cfg = LoopConfig(duration_s=duration, waypoints=WAYPOINTS, outlines=WALLS,
+                     desired_separation_m=5.0, seed=seed, snapshot_times_s=(10.0,))
+    ctrl = controller or LosPidController(IDENTIFIED, WAYPOINTS)
+    return run_closed_loop(ModelPlant(IDENTIFIED), ctrl, NoPerception(), [0, 1.0, 0, 0, 0, 0],
+                           cfg, tmp_path, scenario_name="straight")
+
+
+def test_reaches_the_goal_and_reports_metrics(tmp_path):
+    result = run(tmp_path / "a")
+    s = result.summary
+    assert s["reached_goal"] and s["status"] == "reached goal"
+    assert s["controller"] == "los-pid" and s["seed"] == 1
+    assert 5.8 < s["min_clearance_m"] <= 7.0  # 8 m walls; start 1 m off, last waypoint 2 m off
+    assert s["mean_cross_track_m"] < 0.5
+    assert s["control_effort_Jc"] > 0
+    assert 90 < s["duration_s"] < 130  # ~200 m at 2 m/s after the start
+    t = result.timing
+    assert t["solve_ms"]["max"] >= t["solve_ms"]["mean"] > 0
+    assert set(t["where_the_time_goes_s"]) >= {"plant", "navigation", "controller", "perception"}
+    assert len(result.snapshots) == 1
+
+
+def test_log_is_complete_and_flushed(tmp_path):
+    result = run(tmp_path / "a")
+    lines = result.log_path.read_text().splitlines()
+    assert lines[0].startswith("time_s,true_x_m")
+    assert len(lines) - 1 == result.summary["steps"]
+    last = lines[-1].split(",")
+    assert float(last[0]) == pytest.approx(result.summary["duration_s"] - 0.1)
+
+
+def test_same_seed_gives_byte_identical_summary(tmp_path):
+    run(tmp_path / "a", seed=4)
+    run(tmp_path / "b", seed=4)
+    a = (tmp_path / "a" / "summary.json").read_bytes()
+    assert a == (tmp_path / "b" / "summary.json").read_bytes()
+    run(tmp_path / "c", seed=5)
+    assert a != (tmp_path / "c" / "summary.json").read_bytes()
+
+
+def test_controller_failure_stops_the_boat_and_ends_the_run(tmp_path):
+    class Failing:
+        name = "failing"
+
+        def step(self, t, state, act, segs):
+            if t >= 5.0:
+                return Decision(command=np.array([80.0, 0.0]), ok=False, status="QP infeasible")
+            return Decision(command=np.array([40.0, 0.0]))
+
+    result = run(tmp_path / "f", controller=Failing())
+    s = result.summary
+    assert not s["reached_goal"] and s["status"] == "controller failed: QP infeasible"
+    last = result.log_path.read_text().splitlines()[-1].split(",")
+    assert float(last[13]) == 0.0 and float(last[14]) == 0.0  # neutral commands sent
+    assert json.loads((tmp_path / "f" / "summary.json").read_text())["steps"] == 51
