@@ -204,6 +204,12 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
         "real_time_factor": duration / wall if wall > 0 else None,
         "where_the_time_goes_s": {k: round(v, 4) for k, v in sorted(timer.total.items())},
     }
+    (out_dir / "snapshots.json").write_text(json.dumps([
+        {"time_s": sn.time_s, "state": sn.state.tolist(),
+         "predicted": None if sn.predicted is None else np.asarray(sn.predicted).tolist(),
+         "segments": np.asarray(sn.segments).tolist()}
+        for sn in snapshots
+    ]) + "\n")
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     (out_dir / "timing.json").write_text(json.dumps(timing, indent=2) + "\n")
     return RunResult(summary, timing, snapshots, out_dir / "log.csv")

@@ -75,3 +75,17 @@ def test_controller_failure_stops_the_boat_and_ends_the_run(tmp_path):
     last = result.log_path.read_text().splitlines()[-1].split(",")
     assert float(last[13]) == 0.0 and float(last[14]) == 0.0  # neutral commands sent
     assert json.loads((tmp_path / "f" / "summary.json").read_text())["steps"] == 51
+
+
+def test_plots_are_written_from_the_run_directory(tmp_path):
+    from scenarios import plots
+
+    d = tmp_path / "p"
+    run(d, duration=20.0)
+    outs = [
+        plots.plot_trajectory(d, WALLS, WAYPOINTS, d / "trajectory.png"),
+        plots.plot_separation({"los-pid": d}, 5.0, d / "separation.png"),
+        plots.plot_states(d, d / "states.png"),
+    ]
+    for out in outs:
+        assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 10_000
