@@ -48,9 +48,10 @@ class ModelPlant:
 
     def __init__(self, params: BoatParams, limits: ActuatorLimits = ActuatorLimits(),
                  internal_step_s: float = 0.01):
-        from controller.model import plant_step_function
+        from controller.model import ode_function, plant_step_function
 
         self._step = plant_step_function()
+        self._ode = ode_function()
         self._p = params.as_vector()
         self._rates = np.array([limits.dnT_max, limits.dnS_max], float)
         self._h = internal_step_s
@@ -58,16 +59,12 @@ class ModelPlant:
         self._x = np.zeros(6)
         self._act = np.zeros(2)
         self._t = 0.0
-        self._xdot = np.zeros(6)
 
     def reset(self, state0, current_ne=(0.0, 0.0)) -> PlantOutput:
         self._x = np.asarray(state0, float).copy()
         self._act = np.zeros(2)
         self._current = np.asarray(current_ne, float)
         self._t = 0.0
-        _, _, xdot = self._step(self._x, self._act, self._act, self._p, self._current,
-                                self._rates, self._h)
-        self._xdot = np.asarray(xdot).ravel()
         return self._output()
 
     def step(self, command, dt: float) -> PlantOutput:
@@ -75,15 +72,16 @@ class ModelPlant:
         h = dt / n
         cmd = np.clip(np.asarray(command, float), -100.0, 100.0)
         for _ in range(n):
-            x, act, xdot = self._step(self._x, self._act, cmd, self._p, self._current,
-                                      self._rates, h)
+            x, act, _ = self._step(self._x, self._act, cmd, self._p, self._current,
+                                   self._rates, h)
             self._x, self._act = np.asarray(x).ravel(), np.asarray(act).ravel()
-            self._xdot = np.asarray(xdot).ravel()
         self._t += dt
         return self._output()
 
     def _output(self) -> PlantOutput:
-        return PlantOutput(self._t, self._x.copy(), self._xdot.copy(), self._act.copy())
+        """Outputs at the current time: the derivative is taken at the current state."""
+        xdot = np.asarray(self._ode(self._x, self._act, self._p, self._current)).ravel()
+        return PlantOutput(self._t, self._x.copy(), xdot, self._act.copy())
 
     def close(self) -> None:
         pass
