@@ -51,12 +51,13 @@ def plot_trajectory(run_dir: Path, outlines, waypoints, out: Path, title: str = 
     wp = np.asarray(waypoints)
     ax.plot(wp[:, 1], wp[:, 0], "--", color="tab:blue", lw=1, label="waypoint path")
     ax.plot(log["true_y_m"], log["true_x_m"], color="tab:green", lw=1.5, label="boat (true)")
+    labelled = False
     for j, sn in enumerate(snaps):
-        for seg in np.asarray(sn["segments"]).reshape(-1, 4):
-            xc, yc, th, ln = seg
+        for xc, yc, th, ln in np.asarray(sn["segments"]).reshape(-1, 4):
             dx, dy = 0.5 * ln * np.cos(th), 0.5 * ln * np.sin(th)
             ax.plot([yc - dy, yc + dy], [xc - dx, xc + dx], color="k", lw=3, alpha=0.5,
-                    label="detected segments" if j == 0 and seg is sn["segments"][0] else None)
+                    label=None if labelled else "segments seen by the controller")
+            labelled = True
         if sn["predicted"]:
             pred = np.asarray(sn["predicted"])
             ax.plot(pred[:, 1], pred[:, 0], ".-", color="tab:orange", ms=3, lw=1,

@@ -23,7 +23,7 @@ from controller.params import IDENTIFIED, BoatParams
 
 from .world import OBSTACLE_KINDS, CanalWorld, Obstacle, Wall, _segments_cross
 
-CONTROLLERS = ("nmpc", "los-pid", "nmpc-los-pid", "lexicographic")
+CONTROLLERS = ("nmpc", "los-pid", "lexicographic")
 PERCEPTIONS = ("lidar", "known-walls")
 
 

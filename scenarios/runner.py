@@ -1,0 +1,132 @@
+"""Run a scenario: build its plant, perception and controller, close the loop, plot.
+
+`run_scenario` is what `canalnav run` and the scenario tests call. Plants other than the
+FMU (e.g. the MAVLink plant of `bridge`) register themselves in `PLANTS`, so this package
+never imports `bridge`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Callable
+
+from controller.errors import InputError
+from scenarios.closed_loop import LoopConfig, RunResult, run_closed_loop
+from scenarios.plant import ActuatorLimits, ModelPlant
+from scenarios.scenario_file import Scenario
+
+R_B_M = 3.0  # hull circle radius (paper Table "NMPC parameters")
+
+
+def _fmu_plant(scenario: Scenario, out_dir: Path):
+    from scenarios.fmu_plant import FmuPlant
+
+    return FmuPlant(scenario.plant_params, ActuatorLimits(*scenario.actuator_rates), out_dir)
+
+
+def _model_plant(scenario: Scenario, out_dir: Path):
+    return ModelPlant(scenario.plant_params, ActuatorLimits(*scenario.actuator_rates))
+
+
+PLANTS: dict[str, Callable] = {"fmu": _fmu_plant, "python-model": _model_plant}
+"""Plant factories by name: f(scenario, out_dir) -> Plant."""
+
+
+def make_perception(scenario: Scenario):
+    if scenario.perception == "known-walls":
+        from scenarios.perception import KnownWalls
+
+        return KnownWalls(scenario.world, scenario.known_walls_range_m)
+    from scenarios.perception import LidarPerception
+
+    return LidarPerception(scenario.world, seed=scenario.seed)
+
+
+def make_controller(scenario: Scenario, name: str | None = None):
+    name = name or scenario.controller
+    if name == "los-pid":
+        from scenarios.controllers import LosPidController
+
+        return LosPidController(scenario.controller_params, scenario.waypoints,
+                                _los_pid_config(scenario))
+    if name == "nmpc":
+        from scenarios.controllers import NmpcController
+
+        return NmpcController(scenario)
+    raise InputError(f"controller {name!r} is not available (choose from: {', '.join(CONTROLLERS)})")
+
+
+def _los_pid_config(scenario: Scenario):
+    from controller.baselines.los_pid import LosPidConfig
+
+    return LosPidConfig(target_speed_mps=scenario.target_speed_mps)
+
+
+CONTROLLERS = ("nmpc", "los-pid")
+
+
+def run_scenario(scenario: Scenario, out_dir: Path, controller: str | None = None,
+                 seed: int | None = None, plant: str = "fmu", plots: bool = True,
+                 progress=None) -> RunResult:
+    """Run one scenario into `out_dir` (log.csv, summary.json, timing.json, PNG plots)."""
+    if plant not in PLANTS:
+        raise InputError(f"plant {plant!r} is not available (choose from: {', '.join(PLANTS)})")
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    seed = scenario.seed if seed is None else seed
+    if seed != scenario.seed:
+        from dataclasses import replace
+
+        scenario = replace(scenario, seed=seed)
+    ctrl = make_controller(scenario, controller)
+    perception = make_perception(scenario)
+    the_plant = PLANTS[plant](scenario, out_dir)
+    cfg = LoopConfig(
+        duration_s=scenario.duration_s, waypoints=scenario.waypoints,
+        outlines=tuple(scenario.world.surfaces()),
+        desired_separation_m=R_B_M + scenario.d_p_m, goal_radius_m=scenario.goal_radius_m,
+        current_ne=scenario.current_ne, seed=seed,
+        snapshot_times_s=scenario.snapshot_times_s or _default_snapshots(scenario),
+    )
+    try:
+        result = run_closed_loop(the_plant, ctrl, perception, scenario.initial_state, cfg,
+                                 out_dir, progress=progress, scenario_name=scenario.name)
+    finally:
+        the_plant.close()
+    if plots:
+        from scenarios import plots as p
+
+        title = f"{scenario.name}: {result.summary['controller']}"
+        p.plot_trajectory(out_dir, scenario.world.surfaces(), scenario.waypoints,
+                          out_dir / "trajectory.png", title)
+        p.plot_separation({result.summary["controller"]: out_dir}, cfg.desired_separation_m,
+                          out_dir / "separation.png", title)
+        p.plot_states(out_dir, out_dir / "states.png", title)
+    return result
+
+
+def _default_snapshots(scenario: Scenario) -> tuple:
+    """Four instants spread over the expected run time."""
+    from controller.geometry import Polyline
+
+    expected = Polyline(scenario.waypoints).length / max(scenario.target_speed_mps, 0.1)
+    horizon = min(scenario.duration_s, expected)
+    return tuple(round(horizon * f, 1) for f in (0.15, 0.4, 0.65, 0.9))
+
+
+def check_criteria(scenario: Scenario, summary: dict) -> list[str]:
+    """The scenario's pass criteria that the summary fails, as sentences (empty: passed)."""
+    c, s, failed = scenario.criteria, summary, []
+    if c.reach_goal and not s["reached_goal"]:
+        failed.append(f"did not reach the goal ({s['status']}, "
+                      f"{s['final_distance_to_goal_m']} m from it)")
+    if c.reach_goal_within_s is not None and s["reached_goal"] and s["duration_s"] > c.reach_goal_within_s:
+        failed.append(f"reached the goal after {s['duration_s']} s > {c.reach_goal_within_s} s")
+    if c.min_clearance_m is not None and (s["min_clearance_m"] or 0) < c.min_clearance_m:
+        failed.append(f"min clearance {s['min_clearance_m']} m < {c.min_clearance_m} m")
+    if c.max_time_below_desired_s is not None and s["time_below_desired_s"] > c.max_time_below_desired_s:
+        failed.append(f"{s['time_below_desired_s']} s below the desired separation > "
+                      f"{c.max_time_below_desired_s} s")
+    if c.max_mean_cross_track_m is not None and (s["mean_cross_track_m"] or 0) > c.max_mean_cross_track_m:
+        failed.append(f"mean cross-track {s['mean_cross_track_m']} m > {c.max_mean_cross_track_m} m")
+    return failed
