@@ -246,7 +246,7 @@ class FmuBoat:
     def deserialize_state(self, data: bytes):
         if self.fmi_version == 3:
             return self._slave.deserializeFMUState(data)
-        return self._slave.deserializeFMUstate(data)
+        return self._slave.deSerializeFMUstate(data)
 
     def reset(self) -> None:
         """FMI reset: every variable back to its start value, time back to the start."""

@@ -85,27 +85,29 @@ def reference_outputs(script: Script, comm_step: float, rtol: float = 1e-11,
 
     starts, lengths, acts = actuator_grid(script, comm_step)
     n_comm = int(round(script.duration_s / comm_step))
-    per_comm = len(starts) // n_comm
+    comm_times = np.arange(n_comm + 1) * comm_step  # the FMU's k * H
     x = np.asarray(script.state0, float)
     act = np.clip(np.asarray(script.actuators0, float), -100, 100)
     rows = [np.concatenate([x, accel(x, act)[3:], act])]
-    i = 0
-    for k in range(n_comm):
-        # merge the internal steps of this communication step that hold the same actuators
-        end = i + per_comm
-        while i < end:
-            j = i
-            while j + 1 < end and np.array_equal(acts[j + 1], acts[i]):
-                j += 1
-            t0, t1 = starts[i], starts[j] + lengths[j]
-            act = acts[i]
-            sol = solve_ivp(lambda t, z, a=act: accel(z, a), (t0, t1), x, method="DOP853",
-                            rtol=rtol, atol=atol)
-            if not sol.success:
-                raise RuntimeError(f"reference integration failed at t = {t0}: {sol.message}")
-            x = sol.y[:, -1]
-            i = j + 1
-        rows.append(np.concatenate([x, accel(x, act)[3:], act]))
+    # one solve_ivp per stretch of constant actuators; communication points inside a stretch
+    # come from the integrator's dense output (7th order, within the tolerances)
+    i, n = 0, len(starts)
+    while i < n:
+        j = i
+        while j + 1 < n and np.array_equal(acts[j + 1], acts[i]):
+            j += 1
+        t0, t1, act = starts[i], starts[j] + lengths[j], acts[i]
+        inside = comm_times[len(rows):]
+        inside = inside[inside <= t1 + 1e-9 * comm_step]
+        sol = solve_ivp(lambda t, z, a=act: accel(z, a), (t0, t1), x, method="DOP853",
+                        rtol=rtol, atol=atol, dense_output=len(inside) > 0)
+        if not sol.success:
+            raise RuntimeError(f"reference integration failed at t = {t0}: {sol.message}")
+        for t in inside:
+            z = sol.y[:, -1] if abs(t - t1) <= 1e-9 * comm_step else sol.sol(t)
+            rows.append(np.concatenate([z, accel(z, act)[3:], act]))
+        x = sol.y[:, -1]
+        i = j + 1
     return np.array(rows)
 
 

@@ -115,6 +115,20 @@ int boat_phase_ok(BoatModel *m, unsigned allowed, const char *function) {
 
 /* -- values -------------------------------------------------------------------------- */
 
+/* The shortest of %.15g, %.16g, %.17g that reads back as the same double: messages show
+   what the user typed (-1e-09, not -1.0000000000000001e-09). */
+typedef struct { char text[32]; } Number;
+
+static Number number(double value) {
+    Number n;
+    int digits;
+    for (digits = 15; digits <= 17; digits++) {
+        snprintf(n.text, sizeof n.text, "%.*g", digits, value);
+        if (!isfinite(value) || strtod(n.text, NULL) == value) break;
+    }
+    return n;
+}
+
 static BoatStatus check_value(BoatModel *m, unsigned vr, double value) {
     const char *name = BOAT_NAMES[vr];
     if (BOAT_SETTABLE[vr] == BOAT_SET_NEVER) {
@@ -127,7 +141,7 @@ static BoatStatus check_value(BoatModel *m, unsigned vr, double value) {
         !(m->s.phase & (PHASE_INSTANTIATED | PHASE_INITIALIZATION))) {
         boat_log(m, BOAT_ERROR, BOAT_LOG_ERROR,
                  "variable %s is a fixed parameter: it can be set only before initialization "
-                 "ends (got %.17g in %s)", name, value, phase_name(m->s.phase));
+                 "ends (got %s in %s)", name, number(value).text, phase_name(m->s.phase));
         return BOAT_ERROR;
     }
     if (!isfinite(value)) {
@@ -136,13 +150,14 @@ static BoatStatus check_value(BoatModel *m, unsigned vr, double value) {
         return BOAT_ERROR;
     }
     if (BOAT_SIGN[vr] == 1 && !(value > 0.0)) {
-        boat_log(m, BOAT_ERROR, BOAT_LOG_ERROR, "variable %s: value %.17g must be positive",
-                 name, value);
+        boat_log(m, BOAT_ERROR, BOAT_LOG_ERROR, "variable %s: value %s must be positive",
+                 name, number(value).text);
         return BOAT_ERROR;
     }
     if (BOAT_SIGN[vr] == 2 && value < 0.0) {
         boat_log(m, BOAT_ERROR, BOAT_LOG_ERROR,
-                 "variable %s: value %.17g must be zero (off) or positive", name, value);
+                 "variable %s: value %s must be zero (off) or positive", name,
+                 number(value).text);
         return BOAT_ERROR;
     }
     return BOAT_OK;
@@ -161,7 +176,8 @@ BoatStatus boat_set(BoatModel *m, const unsigned vr[], size_t n, const double va
         }
         if (check_value(m, vr[i], value[i]) != BOAT_OK) return BOAT_ERROR;
         m->s.values[vr[i]] = value[i];
-        boat_log(m, BOAT_OK, BOAT_LOG_CALLS, "set %s = %.17g", BOAT_NAMES[vr[i]], value[i]);
+        boat_log(m, BOAT_OK, BOAT_LOG_CALLS, "set %s = %s", BOAT_NAMES[vr[i]],
+                 number(value[i]).text);
     }
     return BOAT_OK;
 }
@@ -252,8 +268,8 @@ BoatStatus boat_enter_initialization(BoatModel *m, double start_time, int stop_t
         return BOAT_ERROR;
     }
     if (stop_time_defined && !(stop_time >= start_time)) {
-        boat_log(m, BOAT_ERROR, BOAT_LOG_ERROR, "stop time %.17g is before the start time %.17g",
-                 stop_time, start_time);
+        boat_log(m, BOAT_ERROR, BOAT_LOG_ERROR, "stop time %s is before the start time %s",
+                 number(stop_time).text, number(start_time).text);
         return BOAT_ERROR;
     }
     m->s.time = m->s.start_time = start_time;
@@ -292,16 +308,16 @@ BoatStatus boat_do_step(BoatModel *m, double t, double H) {
     tolerance = 1e-9 * fmax(1.0, fabs(m->s.time));
     if (fabs(t - m->s.time) > tolerance) {
         boat_log(m, BOAT_ERROR, BOAT_LOG_ERROR,
-                 "doStep: communication point %.17g does not match the FMU time %.17g", t,
-                 m->s.time);
+                 "doStep: communication point %s does not match the FMU time %s",
+                 number(t).text, number(m->s.time).text);
         return BOAT_ERROR;
     }
     t_end = t + H;
     if (m->s.stop_time_defined &&
         t_end > m->s.stop_time + 1e-9 * fmax(1.0, fabs(m->s.stop_time))) {
         boat_log(m, BOAT_ERROR, BOAT_LOG_ERROR,
-                 "doStep: a step of %.17g s from t = %.17g goes past the stop time %.17g", H, t,
-                 m->s.stop_time);
+                 "doStep: a step of %s s from t = %s goes past the stop time %s",
+                 number(H).text, number(t).text, number(m->s.stop_time).text);
         return BOAT_ERROR;
     }
     n_steps = ceil(H / internal_step - 1e-9);
@@ -321,8 +337,9 @@ BoatStatus boat_do_step(BoatModel *m, double t, double H) {
         plant(m, x, act, v + BOAT_GROUP_CMD, dt, x_next, act_next, xdot);
         if (!all_finite(x_next, NX)) {
             boat_log(m, BOAT_ERROR, BOAT_LOG_ERROR,
-                     "doStep: the state became non-finite at t = %.17g (internal step %g s); "
-                     "the FMU stays at t = %.17g", t + (double)k * dt, dt, t);
+                     "doStep: the state became non-finite at t = %s (internal step %g s); "
+                     "the FMU stays at t = %s", number(t + (double)k * dt).text, dt,
+                     number(t).text);
             return BOAT_ERROR;
         }
         memcpy(x, x_next, sizeof x);
@@ -331,7 +348,8 @@ BoatStatus boat_do_step(BoatModel *m, double t, double H) {
     accelerations(m, x, act, xdot);
     if (!all_finite(xdot, NX)) {
         boat_log(m, BOAT_ERROR, BOAT_LOG_ERROR,
-                 "doStep: the accelerations at t = %.17g are not finite", t_end);
+                 "doStep: the accelerations at t = %s are not finite",
+                 number(t_end).text);
         return BOAT_ERROR;
     }
     memcpy(v + BOAT_GROUP_X, x, sizeof x);
@@ -339,8 +357,8 @@ BoatStatus boat_do_step(BoatModel *m, double t, double H) {
     memcpy(v + BOAT_GROUP_ACCEL, xdot + 3, 3 * sizeof(double));
     /* the master's t + H, not a running sum: no drift of the communication point */
     m->s.time = t_end;
-    boat_log(m, BOAT_OK, BOAT_LOG_CALLS, "doStep t = %.17g, H = %.17g: %ld internal steps", t,
-             H, n);
+    boat_log(m, BOAT_OK, BOAT_LOG_CALLS, "doStep t = %s, H = %s: %ld internal steps",
+             number(t).text, number(H).text, n);
     return BOAT_OK;
 }
 
