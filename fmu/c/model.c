@@ -107,7 +107,7 @@ BoatStatus boat_set_debug_logging(BoatModel *m, int on, size_t n, const char *co
 }
 
 int boat_phase_ok(BoatModel *m, unsigned allowed, const char *function) {
-    if (m->s.phase & allowed) return 1;
+    if ((unsigned)m->s.phase & allowed) return 1;
     boat_log(m, BOAT_ERROR, BOAT_LOG_ERROR, "%s is not allowed in %s", function,
              phase_name(m->s.phase));
     return 0;
