@@ -12,9 +12,33 @@ class KnownWalls:
 
     name = "known-walls"
 
-    def __init__(self, world: CanalWorld, range_m: float = 50.0):
+    def __init__(self, world: CanalWorld, range_m: float = 50.0, air_draft_m: float = np.inf):
         self.world = world
         self.range_m = range_m
+        self.air_draft_m = air_draft_m
 
     def segments(self, time_s, true_state, estimated_state) -> np.ndarray:
-        return self.world.segments_near(np.asarray(true_state)[:2], self.range_m)
+        return self.world.segments_near(np.asarray(true_state)[:2], self.range_m, self.air_draft_m)
+
+
+class LidarPerception:
+    """The simulated three-LiDAR scan at the true pose, detected into segments placed with the
+    estimated pose (so navigation errors move the segments, as on the real boat)."""
+
+    name = "lidar"
+
+    def __init__(self, world: CanalWorld, seed: int = 0, config=None, detection=None):
+        from controller.detection import DEFAULT
+        from scenarios.lidar import LidarSimulator
+
+        self.simulator = LidarSimulator(world, config, seed=seed * 7919 + 3)
+        self.detection = detection or DEFAULT
+        self.points_per_scan: list[int] = []
+
+    def segments(self, time_s, true_state, estimated_state) -> np.ndarray:
+        from controller.detection import detect_segments
+
+        true_state = np.asarray(true_state, float)
+        points = self.simulator.scan(true_state[:3], speed_mps=float(true_state[3]))
+        self.points_per_scan.append(len(points))
+        return detect_segments(points, np.asarray(estimated_state, float)[:3], self.detection)
