@@ -16,6 +16,9 @@ from scenarios.plant import ActuatorLimits, ModelPlant
 from scenarios.scenario_file import Scenario
 
 R_B_M = 3.0  # hull circle radius (paper Table "NMPC parameters")
+AIR_DRAFT_M = 2.5
+"""Height of the boat above the waterline (not published; an open 12-person cruise boat):
+bridges with a higher deck are passed under and do not count for clearance."""
 
 
 def _fmu_plant(scenario: Scenario, out_dir: Path):
@@ -36,7 +39,7 @@ def make_perception(scenario: Scenario):
     if scenario.perception == "known-walls":
         from scenarios.perception import KnownWalls
 
-        return KnownWalls(scenario.world, scenario.known_walls_range_m)
+        return KnownWalls(scenario.world, scenario.known_walls_range_m, AIR_DRAFT_M)
     from scenarios.perception import LidarPerception
 
     return LidarPerception(scenario.world, seed=scenario.seed)
@@ -83,7 +86,7 @@ def run_scenario(scenario: Scenario, out_dir: Path, controller: str | None = Non
     the_plant = PLANTS[plant](scenario, out_dir)
     cfg = LoopConfig(
         duration_s=scenario.duration_s, waypoints=scenario.waypoints,
-        outlines=tuple(scenario.world.surfaces()),
+        outlines=tuple(scenario.world.surfaces(AIR_DRAFT_M)),
         desired_separation_m=R_B_M + scenario.d_p_m, goal_radius_m=scenario.goal_radius_m,
         current_ne=scenario.current_ne, seed=seed,
         snapshot_times_s=scenario.snapshot_times_s or _default_snapshots(scenario),
@@ -97,7 +100,7 @@ def run_scenario(scenario: Scenario, out_dir: Path, controller: str | None = Non
         from scenarios import plots as p
 
         title = f"{scenario.name}: {result.summary['controller']}"
-        p.plot_trajectory(out_dir, scenario.world.surfaces(), scenario.waypoints,
+        p.plot_trajectory(out_dir, scenario.world.surfaces(AIR_DRAFT_M), scenario.waypoints,
                           out_dir / "trajectory.png", title)
         p.plot_separation({result.summary["controller"]: out_dir}, cfg.desired_separation_m,
                           out_dir / "separation.png", title)
