@@ -1,0 +1,512 @@
+"""Three simulated LiDARs on the boat (paper, Table "Boat specifications"): point clouds per scan.
+
+A front 64-beam unit on the bow and port/starboard 32-beam units tilted down, 0.5-120 m.
+One call renders one 10 Hz scan of all three and returns one merged (N, 3) cloud in the
+body frame (x forward, y starboard, z down, origin at the boat's origin on the waterline).
+
+Speed comes from the world being vertical prisms (DESIGN.md, LiDAR): each sensor casts its
+azimuth columns once in 2-D against the wall, backdrop and obstacle outlines, and every beam
+of a column then finds its elevation's hit in closed form (water in front, the wall face,
+the quay top, the backdrop behind, an obstacle's face, top or underside). Beams blocked by
+the boat's own hull and cabin return the hull (detection crops them). Range noise, dropouts,
+speckle off the water and spray in the wake are drawn from one seeded generator.
+
+Simplifications, on purpose: per column only the first wall and the land behind it are
+rendered (nothing beyond the backdrop), one obstacle per column (the nearest), and the boat
+does not roll or pitch.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from controller.errors import InputError
+
+from .world import CanalWorld
+
+# What each returned point hit (see LidarScan.labels).
+WATER, FACE, GROUND, BACKDROP, OBSTACLE, HULL, SPRAY = range(7)
+LABEL_NAMES = ("water", "wall face", "quay top", "backdrop", "obstacle", "own hull", "spray")
+
+
+@dataclass(frozen=True)
+class LidarMount:
+    """One sensor: where it sits on the boat, how it points, and its beam pattern.
+
+    Position in the body frame (x forward, y starboard) and height above the waterline
+    (positive up). Orientation: yaw (to starboard positive), then pitch (nose up positive;
+    a unit tilted down has negative pitch), then roll. Elevations of the beams are spread
+    evenly over [elevation_min_rad, elevation_max_rad] in the sensor's own frame.
+    """
+
+    name: str
+    x_m: float
+    y_m: float
+    height_m: float
+    channels: int
+    yaw_rad: float = 0.0
+    pitch_rad: float = 0.0
+    roll_rad: float = 0.0
+    elevation_min_rad: float = np.radians(-16.6)
+    elevation_max_rad: float = np.radians(16.6)
+    columns: int = 1024  # azimuth samples per revolution
+    min_range_m: float = 0.5
+    max_range_m: float = 120.0
+
+    def __post_init__(self) -> None:
+        if self.channels < 1 or self.columns < 8:
+            raise InputError(f"lidar {self.name!r}: channels >= 1 and columns >= 8 needed")
+        if not 0.0 < self.min_range_m < self.max_range_m:
+            raise InputError(f"lidar {self.name!r}: need 0 < min_range_m < max_range_m")
+        if not self.elevation_min_rad <= self.elevation_max_rad:
+            raise InputError(f"lidar {self.name!r}: elevation_min_rad above elevation_max_rad")
+
+    def rotation(self) -> np.ndarray:
+        """Sensor to body frame (both x forward, y right, z down): Rz(yaw) Ry(pitch) Rx(roll)."""
+        cy, sy = np.cos(self.yaw_rad), np.sin(self.yaw_rad)
+        cp, sp = np.cos(self.pitch_rad), np.sin(self.pitch_rad)
+        cr, sr = np.cos(self.roll_rad), np.sin(self.roll_rad)
+        rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
+        ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
+        rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
+        return rz @ ry @ rx
+
+    def beam_directions(self) -> np.ndarray:
+        """Unit beam directions in the body frame (z down): (channels * columns, 3)."""
+        el = np.linspace(self.elevation_min_rad, self.elevation_max_rad, self.channels)
+        az = np.arange(self.columns) * (2.0 * np.pi / self.columns)
+        el, az = np.meshgrid(el, az, indexing="ij")
+        d = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), -np.sin(el)], -1)
+        return d.reshape(-1, 3) @ self.rotation().T
+
+
+def default_mounts() -> tuple[LidarMount, ...]:
+    """The paper's layout: 64-beam on the bow; 32-beam units on brackets just outboard of the
+    cabin roof, turned outboard and tilted 15 deg down to see the side walls close by."""
+    tilt = np.radians(-15.0)
+    return (
+        LidarMount("front", 3.5, 0.0, 1.3, 64),
+        LidarMount("port", 0.0, -1.35, 2.4, 32, yaw_rad=-np.pi / 2, pitch_rad=tilt),
+        LidarMount("starboard", 0.0, 1.35, 2.4, 32, yaw_rad=np.pi / 2, pitch_rad=tilt),
+    )
+
+
+@dataclass(frozen=True)
+class HullShape:
+    """The boat's own structure as boxes in the body frame: (x0, x1, y0, y1, h0, h1), metres,
+    heights above the waterline. Default: 7.9 m x 2.6 m hull with 0.7 m freeboard and a
+    cabin roof 2.2 m above the water."""
+
+    boxes: tuple[tuple[float, float, float, float, float, float], ...] = (
+        (-3.95, 3.95, -1.3, 1.3, 0.0, 0.7),
+        (-2.6, 1.6, -1.2, 1.2, 0.7, 2.2),
+    )
+
+    @property
+    def stern_x_m(self) -> float:
+        return min(b[0] for b in self.boxes)
+
+    @property
+    def half_breadth_m(self) -> float:
+        return max(max(abs(b[2]), abs(b[3])) for b in self.boxes)
+
+
+@dataclass(frozen=True)
+class LidarNoise:
+    """Imperfections, all drawn from the simulator's seeded generator.
+
+    range_sigma_m: Gaussian range noise. dropout: chance a return is lost. water_speckle:
+    chance a beam that reaches the water returns from it (ripples, floating debris).
+    spray_points: points of wake spray per scan at 2 m/s (scaled by speed, none at rest),
+    in a wedge `spray_length_m` behind the stern up to `spray_height_m` above the water.
+    """
+
+    range_sigma_m: float = 0.02
+    dropout: float = 0.03
+    water_speckle: float = 0.01
+    water_ripple_m: float = 0.05
+    spray_points: int = 300
+    spray_length_m: float = 12.0
+    spray_height_m: float = 1.0
+
+
+@dataclass(frozen=True)
+class LidarConfig:
+    """The sensor suite: mounts, the hull that blocks them, noise, and the scan rate."""
+
+    mounts: tuple[LidarMount, ...] = field(default_factory=default_mounts)
+    hull: HullShape = HullShape()
+    noise: LidarNoise = LidarNoise()
+    rate_hz: float = 10.0
+
+
+@dataclass(frozen=True, eq=False)
+class LidarScan:
+    """One merged scan: points (N, 3) body frame z down, what each hit, and which sensor."""
+
+    points: np.ndarray
+    labels: np.ndarray  # (N,) int, index into LABEL_NAMES
+    sensor: np.ndarray  # (N,) int, index into the config's mounts; -1 for spray
+
+
+def _cross(ax, ay, bx, by):
+    return ax * by - ay * bx
+
+
+def _hull_range(origin, dirs, boxes) -> np.ndarray:
+    """Slant range from `origin` along each direction to the first hull box (inf: clear).
+    Coordinates (x, y, height up)."""
+    best = np.full(len(dirs), np.inf)
+    d = np.where(np.abs(dirs) < 1e-12, 1e-12, dirs)
+    for box in boxes:
+        lo, hi = np.array(box[0::2]), np.array(box[1::2])
+        t1, t2 = (lo - origin) / d, (hi - origin) / d
+        t_near = np.minimum(t1, t2).max(axis=1)
+        t_far = np.maximum(t1, t2).min(axis=1)
+        hit = (t_far >= t_near) & (t_near > 0)
+        best = np.where(hit, np.minimum(best, t_near), best)
+    return best
+
+
+class _Sensor:
+    """Per-mount tables computed once: beams grouped by azimuth bin, hull blocking.
+
+    Each beam keeps its own elevation but takes the azimuth of its bin (the nearest of
+    `columns` per revolution, like an encoder), so every return lies exactly on the surface
+    its column's 2-D cast found. For an untilted unit the two are the same; for a tilted
+    one the azimuth moves by at most half a bin.
+    """
+
+    def __init__(self, mount: LidarMount, hull: HullShape) -> None:
+        self.mount = mount
+        d = mount.beam_directions()
+        dirs_up = d * np.array([1.0, 1.0, -1.0])  # (x, y, height up)
+        origin = np.array([mount.x_m, mount.y_m, mount.height_m])
+        hull_r = _hull_range(origin, dirs_up, hull.boxes)
+        self.origin_body = np.array([mount.x_m, mount.y_m, -mount.height_m], np.float32)
+        self.height = np.float32(mount.height_m)
+        horiz = np.hypot(d[:, 0], d[:, 1])
+        self.bins = mount.columns
+        self.step = 2.0 * np.pi / self.bins
+        bin_of = np.round(np.arctan2(d[:, 1], d[:, 0]) / self.step).astype(np.intp) % self.bins
+        blocked = np.isfinite(hull_r)
+        keep = ~blocked
+        f32 = np.float32
+        self.bin = bin_of[keep]
+        self.tan_el = (dirs_up[keep, 2] / horiz[keep]).astype(f32)
+        self.cos_el = horiz[keep].astype(f32)  # horizontal metres per metre of range
+        with np.errstate(divide="ignore"):
+            self.t_water = np.where(self.tan_el < 0, self.height / -self.tan_el, np.inf).astype(f32)
+        az = self.bin * self.step
+        # Body-frame displacement per metre of horizontal distance, z down.
+        self.vec = np.column_stack([np.cos(az), np.sin(az), -self.tan_el]).astype(f32)
+        # Beams that see the hull: fixed points, only noise changes between scans.
+        hull_ok = blocked & (hull_r >= mount.min_range_m)
+        self.hull_dir = d[hull_ok].astype(f32)
+        self.hull_r = hull_r[hull_ok].astype(f32)
+        self.min_h = f32(mount.min_range_m) * self.cos_el
+        self.max_h = f32(mount.max_range_m) * self.cos_el
+
+
+@dataclass(frozen=True, eq=False)
+class _Beams:
+    """All sensors' world-facing beams in one batch (bins numbered across sensors)."""
+
+    bin: np.ndarray
+    height: np.ndarray
+    tan_el: np.ndarray
+    cos_el: np.ndarray
+    t_water: np.ndarray
+    vec: tuple  # x, y, z arrays: body displacement per metre of horizontal distance
+    origin: tuple  # x, y, z arrays: the beam's sensor position in the body frame
+    min_h: np.ndarray
+    max_h: np.ndarray
+    sensor: np.ndarray
+    hull_points: np.ndarray  # noiseless own-hull returns (x, y, z down)
+    hull_unit: np.ndarray  # their beam directions, for range noise
+    hull_sensor: np.ndarray
+
+    @classmethod
+    def join(cls, sensors) -> "_Beams":
+        offsets = np.cumsum([0] + [s.bins for s in sensors[:-1]])
+        cat = np.concatenate
+        return cls(
+            bin=cat([s.bin + off for s, off in zip(sensors, offsets)]),
+            height=cat([np.full(len(s.bin), s.height, np.float32) for s in sensors]),
+            tan_el=cat([s.tan_el for s in sensors]),
+            cos_el=cat([s.cos_el for s in sensors]),
+            t_water=cat([s.t_water for s in sensors]),
+            vec=tuple(cat([s.vec[:, i] for s in sensors]) for i in range(3)),
+            origin=tuple(cat([np.full(len(s.bin), s.origin_body[i]) for s in sensors])
+                         for i in range(3)),
+            min_h=cat([s.min_h for s in sensors]),
+            max_h=cat([s.max_h for s in sensors]),
+            sensor=cat([np.full(len(s.bin), k, np.int8) for k, s in enumerate(sensors)]),
+            hull_points=cat([s.origin_body + s.hull_r[:, None] * s.hull_dir for s in sensors]),
+            hull_unit=cat([s.hull_dir for s in sensors]),
+            hull_sensor=cat([np.full(len(s.hull_r), k, np.int8) for k, s in enumerate(sensors)]),
+        )
+
+
+class LidarSimulator:
+    """Renders scans of a canal world from a boat pose; one seeded generator for all noise."""
+
+    def __init__(self, world: CanalWorld, config: LidarConfig | None = None,
+                 seed: int | np.random.Generator | None = 0) -> None:
+        self.world = world
+        self.config = config or LidarConfig()
+        self.rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+        self.sensors = [_Sensor(m, self.config.hull) for m in self.config.mounts]
+        self._beams = _Beams.join(self.sensors)
+        self._normals = self.rng.standard_normal(1 << 20, dtype=np.float32)
+        self.max_range_m = max(m.max_range_m for m in self.config.mounts)
+        e = world.edges
+        self._face = e["face"]
+        self._back = e["backdrop"]
+        self._obst = e["obstacle"]
+        self._obstacles = world.obstacles
+
+    @property
+    def mount_positions_body(self) -> np.ndarray:
+        """(S, 2) sensor positions (x, y) in the body frame."""
+        return np.array([[m.x_m, m.y_m] for m in self.config.mounts])
+
+    def sensor_positions(self, pose) -> np.ndarray:
+        """(S, 2) sensor positions in the inertial frame for a boat pose (x, y, psi)."""
+        x, y, psi = np.asarray(pose, float)
+        c, s = np.cos(psi), np.sin(psi)
+        b = self.mount_positions_body
+        return np.column_stack([x + c * b[:, 0] - s * b[:, 1], y + s * b[:, 0] + c * b[:, 1]])
+
+    def in_view(self, pose, xy, height_m: float) -> np.ndarray:
+        """(N, S) mask: sensor s could see the point (x, y) at `height_m` above the water if
+        nothing in the world were in the way: within its range and vertical field of view,
+        and not behind the boat's own hull or cabin. With `CanalWorld.line_of_sight` this is
+        what 'the sensors can see' means in the detection benchmark."""
+        x, y, psi = np.asarray(pose, float)
+        c, s = np.cos(psi), np.sin(psi)
+        rel = np.asarray(xy, float).reshape(-1, 2) - (x, y)
+        body = np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1],
+                                np.full(len(rel), float(height_m))])
+        out = np.zeros((len(rel), len(self.sensors)), bool)
+        for k, sensor in enumerate(self.sensors):
+            m = sensor.mount
+            d = body - (m.x_m, m.y_m, m.height_m)
+            rng_ = np.linalg.norm(d, axis=1)
+            u = d / np.maximum(rng_, 1e-9)[:, None]
+            down = u * (1.0, 1.0, -1.0)  # body frame, z down
+            elev = np.arcsin(np.clip(-(down @ m.rotation())[:, 2], -1.0, 1.0))
+            hull = _hull_range(np.array([m.x_m, m.y_m, m.height_m]), u, self.config.hull.boxes)
+            out[:, k] = ((rng_ >= m.min_range_m) & (rng_ <= m.max_range_m)
+                         & (elev >= m.elevation_min_rad) & (elev <= m.elevation_max_rad)
+                         & ~(hull < rng_))
+        return out
+
+    def scan(self, pose, speed_mps: float = 0.0) -> np.ndarray:
+        """One merged scan at pose (x, y, psi): (N, 3) float32 (as LiDAR drivers deliver),
+        body frame, z down, origin at the boat's origin on the waterline."""
+        return self.scan_labelled(pose, speed_mps).points
+
+    def scan_labelled(self, pose, speed_mps: float = 0.0) -> LidarScan:
+        """One merged scan with what each point hit (for tests, figures and benchmarks)."""
+        pose = np.asarray(pose, float).reshape(-1)
+        if pose.shape != (3,) or not np.all(np.isfinite(pose)):
+            raise InputError(f"lidar: pose must be three finite numbers (x, y, psi), got {pose}")
+        psi = pose[2]
+        reach = self.max_range_m + 10.0
+        origins = self.sensor_positions(pose)
+        tables = [self._cast(s, o, psi, reach) for s, o in zip(self.sensors, origins)]
+        bins = [np.concatenate(col) for col in zip(*tables)]
+        points, labels, sensor = self._render(*bins, origins, psi, reach)
+        spray = self._spray(speed_mps)
+        return LidarScan(np.concatenate([points, spray[0]]),
+                         np.concatenate([labels, spray[1]]),
+                         np.concatenate([sensor, spray[2]]))
+
+    # -- rendering ----------------------------------------------------------------------
+    def _bin_pairs(self, sensor, o, psi, a, b):
+        """(bin, edge, t) for every azimuth bin whose centre ray crosses an edge, t the
+        horizontal distance along that ray. Each edge covers only the bins in its angular
+        span, so the work grows with the bins times the layers crossed, not with all edges."""
+        if not len(a):
+            return np.zeros(0, int), np.zeros(0, int), np.zeros(0)
+        step = sensor.step
+        ang_a = np.arctan2(a[:, 1] - o[1], a[:, 0] - o[0]) - psi
+        ang_b = np.arctan2(b[:, 1] - o[1], b[:, 0] - o[0]) - psi
+        span = (ang_b - ang_a + np.pi) % (2 * np.pi) - np.pi
+        lo = np.where(span < 0, ang_b, ang_a)
+        k0 = np.ceil(lo / step).astype(int)
+        k1 = np.floor((lo + np.abs(span)) / step).astype(int)
+        count = np.maximum(k1 - k0 + 1, 0)
+        total = int(count.sum())
+        edge = np.repeat(np.arange(len(a)), count)
+        k = np.repeat(k0 - (np.cumsum(count) - count), count) + np.arange(total)
+        ray = psi + k * step
+        ex, ey = (b - a)[edge, 0], (b - a)[edge, 1]
+        aox, aoy = a[edge, 0] - o[0], a[edge, 1] - o[1]
+        den = _cross(np.cos(ray), np.sin(ray), ex, ey)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = _cross(aox, aoy, ex, ey) / den
+        ok = np.isfinite(t) & (t > 1e-6)
+        return k[ok] % sensor.bins, edge[ok], t[ok]
+
+    @staticmethod
+    def _nearest(bins, n_bins, t, edge, floor=None):
+        """Per bin, the nearest pair (beyond `floor[bin]` if given): t (inf) and edge (-1)."""
+        if floor is not None:
+            ok = t > floor[bins] + 1e-6
+            bins, t, edge = bins[ok], t[ok], edge[ok]
+        best = np.full(n_bins, np.inf)
+        np.minimum.at(best, bins, t)
+        which = np.full(n_bins, -1)
+        hit = t == best[bins]
+        which[bins[hit]] = edge[hit]
+        return best, which
+
+    def _cull(self, a, b, o, reach):
+        d = np.minimum(np.hypot(*(a - o).T), np.hypot(*(b - o).T))
+        return d < reach + np.hypot(*(b - a).T)
+
+    def _cast(self, sensor: _Sensor, o, psi, reach):
+        """Per azimuth bin of one sensor: distance to the nearest wall face and its height,
+        to the backdrop behind it and its height, and to the nearest obstacle's entry and
+        exit with the obstacle's index (-1: none)."""
+        n_bins = sensor.bins
+        fa, fb, fh = self._face
+        keep = self._cull(fa, fb, o, reach)
+        kb, ke, kt = self._bin_pairs(sensor, o, psi, fa[keep], fb[keep])
+        t_face, e_face = self._nearest(kb, n_bins, kt, ke)
+        wall_h = np.where(e_face >= 0, fh[keep][e_face] if keep.any() else 0.0, 0.0)
+        ba, bb, bh, _ = self._back
+        keep = self._cull(ba, bb, o, reach)
+        kb, ke, kt = self._bin_pairs(sensor, o, psi, ba[keep], bb[keep])
+        t_back, e_back = self._nearest(kb, n_bins, kt, ke, floor=t_face)
+        back_h = np.where(e_back >= 0, bh[keep][e_back] if keep.any() else 0.0, 0.0)
+        t_in, t_out, owner = self._cast_obstacles(sensor, o, psi, reach)
+        return t_face, wall_h, t_back, back_h, t_in, t_out, owner
+
+    def _cast_obstacles(self, sensor, o, psi, reach):
+        n_bins = sensor.bins
+        none = (np.full(n_bins, np.inf), np.full(n_bins, np.inf), np.full(n_bins, -1))
+        if not self._obstacles:
+            return none
+        oa, ob, oo, _, _ = self._obst
+        keep = self._cull(oa, ob, o, reach)
+        if not keep.any():
+            return none
+        oa, ob, oo = oa[keep], ob[keep], oo[keep]
+        kb, ke, kt = self._bin_pairs(sensor, o, psi, oa, ob)
+        t1, e1 = self._nearest(kb, n_bins, kt, ke)
+        owner = np.where(e1 >= 0, oo[e1], -1)
+        same = owner[kb] == oo[ke]
+        t2, _ = self._nearest(kb[same], n_bins, kt[same], ke[same], floor=t1)
+        inside = np.array([obst.contains(o)[0] for obst in self._obstacles])
+        in_bin = (owner >= 0) & inside[np.maximum(owner, 0)]
+        return np.where(in_bin, 0.0, t1), np.where(in_bin, t1, t2), owner
+
+    def _render(self, t_face, wall_h, t_back, back_h, t_in, t_out, owner, origins, psi, reach):
+        """Every beam of every sensor at once: which surface its elevation meets first."""
+        beams = self._beams
+        noise = self.config.noise
+        rng = self.rng
+        f32 = np.float32
+        b = beams.bin
+        h = beams.height
+        tan = beams.tan_el
+        tf = t_face.astype(f32)[b]
+        hw = wall_h.astype(f32)[b]
+        zf = h + tf * tan
+        best = beams.t_water.copy()
+        label = np.zeros(len(b), np.int8)  # WATER
+        face = (zf >= 0) & (zf <= hw)
+        np.copyto(best, tf, where=face)
+        np.copyto(label, FACE, where=face)
+        over = zf > hw
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t_ground = (h - hw) / -tan
+        tb = t_back.astype(f32)[b]
+        ground = over & (tan < 0) & (t_ground < tb)
+        np.copyto(best, t_ground, where=ground)
+        np.copyto(label, GROUND, where=ground)
+        rest = over & ~ground
+        back = rest & (h + tb * tan <= back_h.astype(f32)[b])
+        np.copyto(best, tb, where=back)
+        np.copyto(label, BACKDROP, where=back)
+        np.copyto(best, np.inf, where=rest & ~back)  # sky
+
+        self._render_obstacles(t_in, t_out, owner, best, label)
+
+        ok = (best >= beams.min_h) & (best <= beams.max_h)
+        idx = np.flatnonzero(ok)
+        u = rng.random(len(idx), dtype=f32)
+        lab = label[idx]
+        keep = (u >= noise.dropout) & ((lab != WATER) | (u < noise.dropout + noise.water_speckle))
+        idx, lab = idx[keep], lab[keep]
+        t = best[idx] + self._normal(len(idx)) * (f32(noise.range_sigma_m) * beams.cos_el[idx])
+        pts = np.empty((len(idx), 3), f32)
+        for i in range(3):
+            pts[:, i] = beams.origin[i][idx] + t * beams.vec[i][idx]
+        water = lab == WATER
+        if water.any():
+            pts[water, 2] -= rng.uniform(-1.0, 1.0, int(water.sum())).astype(f32) * f32(
+                noise.water_ripple_m)
+
+        # Own hull: fixed returns, with dropouts and range noise.
+        keep = rng.random(len(beams.hull_points), dtype=f32) >= noise.dropout
+        hull = beams.hull_points[keep] + (
+            self._normal(int(keep.sum())) * f32(noise.range_sigma_m))[:, None] * beams.hull_unit[keep]
+        return (np.concatenate([pts, hull]),
+                np.concatenate([lab, np.full(len(hull), HULL, np.int8)]),
+                np.concatenate([beams.sensor[idx], beams.hull_sensor[keep]]))
+
+    def _normal(self, n: int) -> np.ndarray:
+        """n standard normal draws (float32): a window at a random offset into a table
+        drawn once from the seed; drawing fresh Gaussians would cost more than the
+        rendering. Draws within a scan are independent; windows of different scans start
+        at independent offsets."""
+        size = len(self._normals)
+        if n > size:
+            return self.rng.standard_normal(n, dtype=np.float32)
+        start = int(self.rng.integers(0, size))
+        if start + n <= size:
+            return self._normals[start:start + n]
+        return np.concatenate([self._normals[start:], self._normals[:start + n - size]])
+
+    def _render_obstacles(self, t_in, t_out, owner, best, label) -> None:
+        """Where a beam meets an obstacle (face, top or underside) before `best`, take it.
+        Only beams whose column crosses an obstacle are touched."""
+        beams = self._beams
+        idx = np.flatnonzero((owner >= 0)[beams.bin])
+        if not len(idx):
+            return
+        _, _, _, zb_all, zt_all = self._obst
+        b = beams.bin[idx]
+        tan = beams.tan_el[idx].astype(float)
+        h = beams.height[idx].astype(float)
+        tin, tout = t_in[b], t_out[b]
+        zlo, zhi = zb_all[owner[b]], zt_all[owner[b]]
+        zi = h + tin * tan
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t_top = np.where(tan < 0, (h - zhi) / -tan, np.inf)
+            t_under = np.where(tan > 0, (zlo - h) / tan, np.inf)
+        t = np.where((tin > 0) & (zi >= zlo) & (zi <= zhi), tin, np.inf)
+        t = np.minimum(t, np.where((zi > zhi) & (t_top > tin) & (t_top < tout), t_top, np.inf))
+        t = np.minimum(t, np.where((zi < zlo) & (t_under > tin) & (t_under < tout), t_under, np.inf))
+        nearer = t < best[idx]
+        best[idx[nearer]] = t[nearer]
+        label[idx[nearer]] = OBSTACLE
+
+    def _spray(self, speed_mps: float):
+        """Droplets in a wedge behind the stern; more at speed, none at rest."""
+        noise, hull = self.config.noise, self.config.hull
+        n = self.rng.poisson(noise.spray_points * min(max(speed_mps, 0.0) / 2.0, 2.0))
+        back = self.rng.uniform(0.0, noise.spray_length_m, n)
+        half = hull.half_breadth_m + 0.15 * back
+        pts = np.column_stack([
+            hull.stern_x_m - back,
+            self.rng.uniform(-1.0, 1.0, n) * half,
+            -self.rng.uniform(0.0, noise.spray_height_m, n),
+        ])
+        return pts.astype(np.float32), np.full(n, SPRAY, np.int8), np.full(n, -1, np.int8)

@@ -1,0 +1,377 @@
+"""The canal world: a 2.5-D model of quay walls, what stands behind them, and obstacles.
+
+Everything is vertical prisms over a flat water surface at height 0 (DESIGN.md, LiDAR): a
+wall is a polyline face from the water up to its quay top, with a strip of quay (road,
+pavement) behind it and a backdrop (buildings, trees) further back; an obstacle (pier, moored
+boat, bridge deck) is a polygon between two heights. Heights are metres above the waterline,
+positive up; x, y are NED metres. Scenario files (TOML) load into these dataclasses; the
+LiDAR simulator renders them and the metrics measure clearance against them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from controller.errors import InputError
+from controller.geometry import Polyline, point_segment_distance, wrap_angle
+
+LAND_SIDES = ("left", "right")
+OBSTACLE_KINDS = ("pier", "boat", "bridge", "other")
+
+
+def _as_points(value, what: str, closed_min: int = 2) -> np.ndarray:
+    """A finite (K, 2) float array, read-only, or an InputError naming `what`."""
+    try:
+        pts = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{what}: expected a list of [x, y] points in metres") from None
+    if pts.ndim != 2 or pts.shape[1] != 2:
+        raise InputError(f"{what}: expected a list of [x, y] points, got shape {pts.shape}")
+    if len(pts) < closed_min:
+        raise InputError(f"{what}: needs at least {closed_min} points, got {len(pts)}")
+    if not np.all(np.isfinite(pts)):
+        raise InputError(f"{what}: point {int(np.argmin(np.isfinite(pts).all(1)))} is not finite")
+    if np.any(np.hypot(*np.diff(pts, axis=0).T) <= 0.0):
+        raise InputError(f"{what}: repeated point at index {int(np.argmin(np.hypot(*np.diff(pts, axis=0).T)))}")
+    pts.setflags(write=False)
+    return pts
+
+
+def _check_number(value, what: str, low: float | None = None, strict: bool = False) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+        raise InputError(f"{what}: expected a finite number, got {value!r}")
+    if low is not None and (value <= low if strict else value < low):
+        raise InputError(f"{what}: must be {'>' if strict else '>='} {low}, got {value!r}")
+
+
+def _segments_cross(a1, b1, a2, b2) -> np.ndarray:
+    """(N, M) mask: segment i of (a1, b1) properly crosses segment j of (a2, b2)."""
+    def cross(o, p, q):
+        return (p[..., 0] - o[..., 0]) * (q[..., 1] - o[..., 1]) - (
+            p[..., 1] - o[..., 1]) * (q[..., 0] - o[..., 0])
+
+    A1, B1 = a1[:, None, :], b1[:, None, :]
+    A2, B2 = a2[None, :, :], b2[None, :, :]
+    d1, d2 = cross(A2, B2, A1), cross(A2, B2, B1)
+    d3, d4 = cross(A1, B1, A2), cross(A1, B1, B2)
+    return (d1 * d2 < 0) & (d3 * d4 < 0)
+
+
+def self_intersection(points) -> tuple[int, int] | None:
+    """Indices (i, j) of two non-adjacent legs of a polyline that cross, or None."""
+    pts = np.asarray(points, float)
+    a, b = pts[:-1], pts[1:]
+    hits = _segments_cross(a, b, a, b)
+    hits &= np.abs(np.subtract.outer(np.arange(len(a)), np.arange(len(a)))) > 1
+    if not hits.any():
+        return None
+    i, j = np.argwhere(hits)[0]
+    return int(i), int(j)
+
+
+def offset_polyline(points, offset_m) -> np.ndarray:
+    """The polyline moved sideways by `offset_m` (per vertex or scalar; > 0 to the right).
+
+    Right of the direction of travel is starboard: (dx, dy) -> (-dy, dx) in NED. Vertices use
+    mitred normals (capped at 2x) so straight legs stay parallel to the original.
+    """
+    pts = np.asarray(points, float)
+    d = np.diff(pts, axis=0)
+    d /= np.hypot(*d.T)[:, None]
+    n_leg = np.column_stack([-d[:, 1], d[:, 0]])
+    n = np.vstack([n_leg[:1], n_leg[:-1] + n_leg[1:], n_leg[-1:]])
+    n /= np.maximum(np.hypot(*n.T), 1e-12)[:, None]
+    cos_half = np.concatenate([[1.0], np.einsum("ij,ij->i", n[1:-1], n_leg[1:]), [1.0]])
+    scale = 1.0 / np.clip(cos_half, 0.5, 1.0)
+    off = np.broadcast_to(np.asarray(offset_m, float), (len(pts),))
+    return pts + n * (off * scale)[:, None]
+
+
+@dataclass(frozen=True, eq=False)
+class Wall:
+    """A vertical quay wall: the face polyline, its top above water, and the land behind it.
+
+    `land_side` says on which side of the polyline's direction the land lies. Behind the
+    face runs a quay top (ground at `height_m`) `setback_m` deep, then a backdrop (buildings,
+    trees) up to `backdrop_height_m` above water (0: open land, nothing stands there).
+    """
+
+    points: np.ndarray  # (K, 2) wall face, NED metres
+    height_m: float = 1.5
+    land_side: str = "left"
+    setback_m: float = 5.0
+    backdrop_height_m: float = 8.0
+    name: str = "wall"
+
+    def __post_init__(self) -> None:
+        what = f"wall {self.name!r}"
+        object.__setattr__(self, "points", _as_points(self.points, f"{what}: points"))
+        _check_number(self.height_m, f"{what}: height_m", 0.0, strict=True)
+        _check_number(self.setback_m, f"{what}: setback_m", 0.0, strict=True)
+        _check_number(self.backdrop_height_m, f"{what}: backdrop_height_m", 0.0)
+        if self.land_side not in LAND_SIDES:
+            raise InputError(f"{what}: land_side must be 'left' or 'right', got {self.land_side!r}")
+        crossing = self_intersection(self.points)
+        if crossing is not None:
+            raise InputError(f"{what}: points: the wall crosses itself (legs {crossing[0]} "
+                             f"and {crossing[1]})")
+
+    @property
+    def land_sign(self) -> float:
+        """+1 if the land is to the right of the polyline's direction, -1 if to the left."""
+        return 1.0 if self.land_side == "right" else -1.0
+
+    @property
+    def backdrop(self) -> np.ndarray | None:
+        """The backdrop's front line (the face offset onto the land), or None if open land."""
+        if self.backdrop_height_m <= self.height_m:
+            return None
+        return offset_polyline(self.points, self.land_sign * self.setback_m)
+
+
+@dataclass(frozen=True, eq=False)
+class Obstacle:
+    """A prism in the water: a polygon outline between two heights above the waterline.
+
+    Piers and moored boats stand on the water (z_bottom_m = 0); a bridge deck spans the canal
+    above it (z_bottom_m = its clearance), so a boat lower than that passes under it.
+    """
+
+    outline: np.ndarray  # (K, 2) polygon, not repeated at the end
+    z_top_m: float = 1.0
+    z_bottom_m: float = 0.0
+    kind: str = "pier"
+    name: str = "obstacle"
+
+    def __post_init__(self) -> None:
+        what = f"obstacle {self.name!r}"
+        pts = _as_points(self.outline, f"{what}: outline", closed_min=3)
+        if np.allclose(pts[0], pts[-1]):
+            pts = pts[:-1]
+            pts.setflags(write=False)
+        object.__setattr__(self, "outline", pts)
+        _check_number(self.z_bottom_m, f"{what}: z_bottom_m", 0.0)
+        _check_number(self.z_top_m, f"{what}: z_top_m")
+        if self.z_top_m <= self.z_bottom_m:
+            raise InputError(f"{what}: z_top_m ({self.z_top_m}) must be above z_bottom_m "
+                             f"({self.z_bottom_m})")
+        if self.kind not in OBSTACLE_KINDS:
+            raise InputError(f"{what}: kind must be one of {', '.join(OBSTACLE_KINDS)}, "
+                             f"got {self.kind!r}")
+        crossing = self_intersection(self.closed)
+        if crossing is not None:
+            raise InputError(f"{what}: outline crosses itself (legs {crossing[0]} and {crossing[1]})")
+
+    @property
+    def closed(self) -> np.ndarray:
+        """The outline with its first point repeated at the end: (K + 1, 2)."""
+        return np.vstack([self.outline, self.outline[:1]])
+
+    def contains(self, xy) -> np.ndarray:
+        """Whether each point lies inside the outline (even-odd rule)."""
+        p = np.asarray(xy, float).reshape(-1, 2)
+        a, b = self.outline, np.roll(self.outline, -1, axis=0)
+        straddle = (a[None, :, 1] > p[:, None, 1]) != (b[None, :, 1] > p[:, None, 1])
+        dy = np.where(b[:, 1] != a[:, 1], b[:, 1] - a[:, 1], 1.0)
+        x_at = a[None, :, 0] + (p[:, None, 1] - a[None, :, 1]) * (b[:, 0] - a[:, 0]) / dy
+        return ((straddle & (p[:, None, 0] < x_at)).sum(axis=1) % 2) == 1
+
+
+@dataclass(frozen=True, eq=False)
+class CanalWorld:
+    """Walls and obstacles of one canal, plus its centre line for 'distance along the canal'."""
+
+    walls: tuple[Wall, ...]
+    obstacles: tuple[Obstacle, ...] = ()
+    centre_line: np.ndarray | None = None  # (K, 2); None: the walls' mean is not guessed
+    name: str = "canal"
+    edges: dict = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "walls", tuple(self.walls))
+        object.__setattr__(self, "obstacles", tuple(self.obstacles))
+        if not self.walls:
+            raise InputError(f"canal {self.name!r}: walls: at least one wall is needed")
+        if self.centre_line is not None:
+            object.__setattr__(
+                self, "centre_line", _as_points(self.centre_line, f"canal {self.name!r}: centre_line"))
+        object.__setattr__(self, "edges", self._edge_tables())
+
+    # -- construction -------------------------------------------------------------------
+    @classmethod
+    def from_centre_line(cls, centre_line, width_m, *, wall_height_m=1.5, setback_m=5.0,
+                         backdrop_height_m=8.0, obstacles=(), name="canal") -> "CanalWorld":
+        """Two walls at +-width/2 from a centre line.
+
+        `width_m` is a number or a profile: a list of (s_m, width_m) pairs, linearly
+        interpolated over the arc length s of the centre line (held constant past its ends).
+        Height, setback and backdrop are a number (both banks) or a (left, right) pair.
+        """
+        centre = _as_points(centre_line, f"canal {name!r}: centre_line")
+        s = Polyline(centre).cumulative
+        width = _width_profile(width_m, s, f"canal {name!r}: width_m")
+
+        def side(value, i, what):
+            v = value[i] if isinstance(value, (tuple, list)) else value
+            _check_number(v, f"canal {name!r}: {what}", 0.0)
+            return float(v)
+
+        walls = tuple(
+            Wall(offset_polyline(centre, sign * width / 2.0),
+                 height_m=side(wall_height_m, i, "wall_height_m"), land_side=land,
+                 setback_m=side(setback_m, i, "setback_m"),
+                 backdrop_height_m=side(backdrop_height_m, i, "backdrop_height_m"), name=land)
+            for i, (sign, land) in enumerate(((-1.0, "left"), (1.0, "right")))
+        )
+        return cls(walls, tuple(obstacles), centre, name)
+
+    @classmethod
+    def from_walls(cls, walls, obstacles=(), centre_line=None, name="canal") -> "CanalWorld":
+        """From explicit walls (Wall objects); the centre line is optional."""
+        return cls(tuple(walls), tuple(obstacles), centre_line, name)
+
+    # -- queries ------------------------------------------------------------------------
+    def wall_polylines(self) -> list[np.ndarray]:
+        """The true wall faces, (K, 2) each: the ground truth for clearance metrics."""
+        return [w.points for w in self.walls]
+
+    def obstacle_outlines(self, air_draft_m: float = np.inf) -> list[np.ndarray]:
+        """Closed outlines of the obstacles a boat this tall would hit (bridges it passes under
+        are left out when z_bottom_m >= air_draft_m)."""
+        return [o.closed for o in self.obstacles if o.z_bottom_m < air_draft_m]
+
+    def surfaces(self, air_draft_m: float = np.inf) -> list[np.ndarray]:
+        """Every true vertical surface in the water: wall faces and obstacle outlines."""
+        return self.wall_polylines() + self.obstacle_outlines(air_draft_m)
+
+    def surface_edges(self, air_draft_m: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+        """All legs of `surfaces()` as two (M, 2) endpoint arrays a, b."""
+        lines = self.surfaces(air_draft_m)
+        return (np.vstack([p[:-1] for p in lines]), np.vstack([p[1:] for p in lines]))
+
+    def clearance(self, points, air_draft_m: float = np.inf) -> np.ndarray:
+        """Distance from each (x, y) point to the nearest true surface: shape (N,)."""
+        a, b = self.surface_edges(air_draft_m)
+        return point_segment_distance(points, a, b).min(axis=1)
+
+    def segments_near(self, xy, radius_m: float, air_draft_m: float = np.inf) -> np.ndarray:
+        """True surfaces within `radius_m` of a point, clipped to that circle: (M, 4) rows
+        (x_c, y_c, theta, length) as detection gives them (the paper's known-walls case)."""
+        a, b = self.surface_edges(air_draft_m)
+        c = np.asarray(xy, float).reshape(-1)[:2]
+        d = b - a
+        dd = np.einsum("ij,ij->i", d, d)
+        f = a - c
+        bq = np.einsum("ij,ij->i", f, d)
+        disc = bq * bq - dd * (np.einsum("ij,ij->i", f, f) - radius_m**2)
+        root = np.sqrt(np.maximum(disc, 0.0))
+        t0 = np.clip((-bq - root) / dd, 0.0, 1.0)
+        t1 = np.clip((-bq + root) / dd, 0.0, 1.0)
+        keep = (disc > 0) & (t1 > t0)
+        p0, p1 = a + t0[:, None] * d, a + t1[:, None] * d
+        p0, p1 = p0[keep], p1[keep]
+        dv = p1 - p0
+        return np.column_stack([(p0 + p1) / 2.0, np.arctan2(dv[:, 1], dv[:, 0]),
+                                np.hypot(*dv.T)]).reshape(-1, 4)
+
+    def surface_samples(self, centre, radius_m: float, spacing_m: float = 0.25,
+                        air_draft_m: float = np.inf):
+        """Points every `spacing_m` along the true surfaces within `radius_m` of `centre`.
+
+        Returns (points (N, 2), directions (N,) rad of the surface there, edge (N,) index into
+        `surface_edges(air_draft_m)`); each point stands for `spacing_m` of surface.
+        """
+        a, b = self.surface_edges(air_draft_m)
+        centre = np.asarray(centre, float).reshape(2)
+        near = np.flatnonzero(point_segment_distance(centre, a, b)[0] <= radius_m)
+        length = np.hypot(*(b[near] - a[near]).T)
+        count = np.maximum(np.ceil(length / spacing_m).astype(int), 1)
+        edge = np.repeat(near, count)
+        frac = (np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count) + 0.5)
+        frac /= np.repeat(count, count)
+        d = b[edge] - a[edge]
+        pts = a[edge] + frac[:, None] * d
+        inside = np.hypot(*(pts - centre).T) <= radius_m
+        return pts[inside], np.arctan2(d[inside, 1], d[inside, 0]), edge[inside]
+
+    def line_of_sight(self, origins, points, edge, air_draft_m: float = np.inf) -> np.ndarray:
+        """(N, S) mask: the straight 2-D line from origin s to point n crosses no surface
+        other than the point's own edge (an index into `surface_edges(air_draft_m)`)."""
+        a, b = self.surface_edges(air_draft_m)
+        pts = np.asarray(points, float).reshape(-1, 2)
+        origins = np.asarray(origins, float).reshape(-1, 2)
+        out = np.zeros((len(pts), len(origins)), bool)
+        if not len(pts):
+            return out
+        reach = np.hypot(*(pts[:, None, :] - origins[None, :, :]).transpose(2, 0, 1)).max()
+        for k, o in enumerate(origins):
+            cand = np.flatnonzero(point_segment_distance(o, a, b)[0] <= reach)
+            back = o - pts
+            target = pts + 0.01 * back / np.maximum(np.hypot(*back.T), 1e-9)[:, None]
+            blocked = _segments_cross(np.broadcast_to(o, pts.shape), target, a[cand], b[cand])
+            own = edge[:, None] == cand[None, :]
+            out[:, k] = ~(blocked & ~own).any(axis=1)
+        return out
+
+    def pose_at(self, s_m: float, offset_m: float = 0.0) -> np.ndarray:
+        """(x, y, psi) on the centre line at arc length s, moved `offset_m` to starboard."""
+        if self.centre_line is None:
+            raise InputError(f"canal {self.name!r}: has no centre line to measure distance along")
+        line = Polyline(self.centre_line)
+        if not 0.0 <= s_m <= line.length:
+            raise InputError(f"canal {self.name!r}: distance along the canal {s_m!r} m is "
+                             f"outside 0..{line.length:.1f} m")
+        xy, heading = line.at(s_m)
+        h = float(heading[0])
+        xy = xy[0] + offset_m * np.array([-np.sin(h), np.cos(h)])
+        return np.array([xy[0], xy[1], float(wrap_angle(h))])
+
+    @property
+    def length_m(self) -> float:
+        """Length of the centre line (0 if there is none)."""
+        return 0.0 if self.centre_line is None else Polyline(self.centre_line).length
+
+    # -- tables for renderers -----------------------------------------------------------
+    def _edge_tables(self) -> dict:
+        """Flat edge arrays for the LiDAR simulator: faces, backdrops, obstacles."""
+        def legs(lines):
+            if not lines:
+                return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, int)
+            a = np.vstack([p[:-1] for p in lines])
+            b = np.vstack([p[1:] for p in lines])
+            owner = np.concatenate([np.full(len(p) - 1, i) for i, p in enumerate(lines)])
+            return a, b, owner
+
+        fa, fb, fo = legs([w.points for w in self.walls])
+        backdrops = [(i, w.backdrop) for i, w in enumerate(self.walls) if w.backdrop is not None]
+        ba, bb, bo = legs([p for _, p in backdrops])
+        bo = np.array([backdrops[k][0] for k in bo], int) if len(bo) else bo
+        oa, ob, oo = legs([o.closed for o in self.obstacles])
+        return {
+            "face": (fa, fb, np.array([self.walls[k].height_m for k in fo])),
+            "backdrop": (ba, bb, np.array([self.walls[k].backdrop_height_m for k in bo]),
+                         np.array([self.walls[k].height_m for k in bo])),
+            "obstacle": (oa, ob, oo,
+                         np.array([o.z_bottom_m for o in self.obstacles]),
+                         np.array([o.z_top_m for o in self.obstacles])),
+        }
+
+
+def _width_profile(width_m, s: np.ndarray, what: str) -> np.ndarray:
+    """Width at each centre-line vertex from a number or (s, width) pairs."""
+    if isinstance(width_m, (int, float)) and not isinstance(width_m, bool):
+        _check_number(width_m, what, 0.0, strict=True)
+        return np.full(len(s), float(width_m))
+    try:
+        table = np.array(width_m, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{what}: expected a number or a list of [s_m, width_m] pairs") from None
+    if table.ndim != 2 or table.shape[1] != 2 or len(table) < 1:
+        raise InputError(f"{what}: expected a number or a list of [s_m, width_m] pairs")
+    if not np.all(np.isfinite(table)) or np.any(table[:, 1] <= 0):
+        raise InputError(f"{what}: widths must be finite and positive")
+    if np.any(np.diff(table[:, 0]) <= 0):
+        raise InputError(f"{what}: the s_m values must increase")
+    return np.interp(s, table[:, 0], table[:, 1])
