@@ -1,0 +1,421 @@
+"""The NMPC of the paper's §III-B: the optimal control problem, written once.
+
+    min  sum_{i<Np} (x_i - r_i)' Q (x_i - r_i) + u_i' R u_i + rho s_i^2
+         + (x_Np - r_Np)' Q_T (x_Np - r_Np) + rho s_Np^2
+    s.t. x_0 = x_init,   x_{i+1} = f_d(x_i, u_i, P*)               (multiple shooting)
+         |nT|, |nS| <= 100 %,  |dnT| <= 10 %/s,  |dnS| <= 40 %/s
+         h(p_circle(x_i), L_j, s_i) >= 0   per hull circle, segment slot and stage (eq. mpc:pnorm)
+
+with x = [x, y, psi, u, v, r, nT, nS] and u = [dnT, dnS] (DESIGN.md, NMPC). Choices the paper
+leaves open, and why:
+- The slack may shrink the super-ellipse's minor half axis, -(R_b + d_p) + 0.1 <= s_i <= 0:
+  printed with s_i >= 0 it could only make the constraint harder and an optimiser keeps it at 0.
+- The slack is carried as a ninth state, s_{i+1} = sigma_i with sigma_i a third input. Each
+  stage's constraints then involve only that stage's variables, as structure-exploiting QP
+  solvers (hpipm) need, and the terminal stage has its slack too.
+- Obstacle constraints act on stages 1..Np: x_0 is fixed, so at stage 0 a constraint could
+  only make the problem infeasible when the boat is already too close.
+- h is the 4th root of the paper's super-ellipse, (X^4 + Y^4)^(1/4) - 1 >= 0: the same set,
+  but it grows like a distance, so its linearisation far from a wall stays accurate and the
+  QP is well scaled (the paper's X^4 + Y^4 - 1 reaches 1e4 for a wall 50 m away).
+- Segments come in a fixed number of slots (16, see `segment_slots`), each with an `active`
+  flag that multiplies its constraint: the problem is built (and compiled) once.
+
+Everything that changes at run time is a parameter of the problem: the boat parameters, the
+current, the reference, the segments, R_b and d_p. Structure (Np, Ts, RK4 sub-steps, number of
+slots) is fixed when the problem is built.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+
+import casadi as ca
+import numpy as np
+
+from .errors import InputError
+from .model import SMOOTH, Variant, augmented_ode, rk4
+from .params import IDENTIFIED, PARAM_NAMES, BoatParams
+from .segment_slots import SLOT_FIELDS
+
+NX_BOAT = 8  # [x, y, psi, u, v, r, nT, nS]
+NX = 9  # plus the slack of the stage
+NU = 3  # [dnT, dnS, sigma]: sigma is the next stage's slack
+STATE_NAMES = ("x", "y", "psi", "u", "v", "r", "nT", "nS", "slack")
+INPUT_NAMES = ("dnT", "dnS", "next_slack")
+_NP = len(PARAM_NAMES)  # boat parameters
+
+
+@dataclass(frozen=True)
+class NmpcConfig:
+    """The paper's Table "NMPC parameters" (weights in percent units, DESIGN.md) and our knobs."""
+
+    horizon: int = 25  # Np, stages
+    step_s: float = 1.0  # Ts, s
+    control_period_s: float = 0.1  # the controller runs at 10 Hz
+    rk4_substeps: int = 4  # sway and yaw settle in ~0.5 s: one RK4 step per 1 s is too coarse
+    q_diag: tuple[float, ...] = (1.0, 1.0, 500.0, 10.0, 0.0, 1000.0, 0.0, 0.0)
+    r_diag: tuple[float, float] = (1.0, 1.0)  # on [dnT, dnS] in (%/s)^2
+    terminal_factor: float | None = None  # Q_T = factor * Q; None means Np, as in the paper
+    slack_weight: float = 1e4  # rho, per m^2
+    nT_max: float = 100.0  # %
+    nS_max: float = 100.0  # %
+    dnT_max: float = 10.0  # %/s
+    dnS_max: float = 40.0  # %/s
+    hull_radius_m: float = 3.0  # R_b
+    hull_offsets_m: tuple[float, float] = (2.0, -2.0)  # circle centres along body x (l_b, -l_s)
+    separation_m: float = 2.0  # d_p: 2 m in simulation, 4 m in the field
+    min_half_axis_m: float = 0.1  # the slack may shrink R_b + d_p down to this
+    segment_slots: int = 16
+    segment_range_m: float = 50.0  # segments farther than this are left out
+    smooth_eps: float = SMOOTH.eps  # of the smooth |z| in the prediction model
+    hessian_regularisation: float = 1e-6  # on zero diagonal weights (v, nT, nS, sigma)
+    boat: BoatParams = field(default=IDENTIFIED)
+
+    def __post_init__(self) -> None:
+        def bad(name, why):
+            raise InputError(f"NMPC config {name!r}: {why}, got {getattr(self, name)!r}")
+
+        for f in fields(self):
+            value = getattr(self, f.name)
+            values = value if isinstance(value, tuple) else (value,)
+            if f.name in ("boat", "terminal_factor") or value is None:
+                continue
+            if any(not isinstance(v, (int, float)) or isinstance(v, bool) for v in values):
+                bad(f.name, "expected numbers")
+            if any(not math.isfinite(v) for v in values):
+                bad(f.name, "must be finite")
+        if len(self.q_diag) != NX_BOAT:
+            bad("q_diag", f"needs {NX_BOAT} weights for [x, y, psi, u, v, r, nT, nS]")
+        if len(self.r_diag) != 2:
+            bad("r_diag", "needs 2 weights for [dnT, dnS]")
+        for name in ("q_diag", "r_diag"):
+            if any(v < 0 for v in getattr(self, name)):
+                bad(name, "weights must not be negative")
+        if self.terminal_factor is not None and not (
+            math.isfinite(self.terminal_factor) and self.terminal_factor >= 0
+        ):
+            bad("terminal_factor", "must be a non-negative number or None")
+        for name in ("slack_weight", "separation_m", "hessian_regularisation"):
+            if getattr(self, name) < 0:
+                bad(name, "must not be negative")
+        for name in ("step_s", "control_period_s", "nT_max", "nS_max", "dnT_max", "dnS_max",
+                     "hull_radius_m", "min_half_axis_m", "segment_range_m", "smooth_eps"):
+            if getattr(self, name) <= 0:
+                bad(name, "must be positive")
+        for name in ("horizon", "rk4_substeps", "segment_slots"):
+            if int(getattr(self, name)) != getattr(self, name) or getattr(self, name) < 1:
+                bad(name, "must be a positive integer")
+        if self.control_period_s > self.step_s:
+            bad("control_period_s", "must not exceed step_s")
+        if self.min_half_axis_m >= self.hull_radius_m + self.separation_m:
+            bad("min_half_axis_m", "must be below R_b + d_p")
+        if len(self.hull_offsets_m) != 2:
+            bad("hull_offsets_m", "needs the two circle centres")
+        if not isinstance(self.boat, BoatParams):
+            bad("boat", "expected a BoatParams")
+
+    # -- derived --------------------------------------------------------------------------
+    @property
+    def Q(self) -> np.ndarray:
+        return np.diag(self.q_diag)
+
+    @property
+    def Q_T(self) -> np.ndarray:
+        factor = self.horizon if self.terminal_factor is None else self.terminal_factor
+        return factor * self.Q
+
+    @property
+    def R(self) -> np.ndarray:
+        return np.diag(self.r_diag)
+
+    @property
+    def slack_min_m(self) -> float:
+        """Lower bound of s_i: the minor half axis R_b + d_p + s_i stays >= min_half_axis_m."""
+        return -(self.hull_radius_m + self.separation_m) + self.min_half_axis_m
+
+    def structure(self) -> dict:
+        """What is compiled into the problem (a change needs a new build)."""
+        return {"horizon": self.horizon, "step_s": self.step_s,
+                "rk4_substeps": self.rk4_substeps, "segment_slots": self.segment_slots,
+                "smooth_eps": self.smooth_eps}
+
+
+# -- the runtime parameters of the problem: one flat vector --------------------------------
+@dataclass(frozen=True)
+class ParamLayout:
+    """Where each runtime parameter sits in the problem's parameter vector."""
+
+    n_slots: int
+
+    @property
+    def boat(self) -> slice:  # model parameters, PARAM_NAMES order
+        return slice(0, _NP)
+
+    @property
+    def current(self) -> slice:  # [north, east] m/s
+        return slice(_NP, _NP + 2)
+
+    @property
+    def geometry(self) -> slice:  # [R_b, d_p, offset_front, offset_back]
+        return slice(_NP + 2, _NP + 6)
+
+    @property
+    def segments(self) -> slice:  # n_slots x SLOT_FIELDS, row-major
+        start = _NP + 6
+        return slice(start, start + self.n_slots * len(SLOT_FIELDS))
+
+    @property
+    def size(self) -> int:
+        return self.segments.stop
+
+
+def pack_params(config: NmpcConfig, segment_slots: np.ndarray, current=(0.0, 0.0),
+                boat: BoatParams | None = None) -> np.ndarray:
+    """The problem's parameter vector from its parts (segment slots as (n_slots, 5))."""
+    layout = ParamLayout(config.segment_slots)
+    p = np.empty(layout.size)
+    p[layout.boat] = (boat or config.boat).as_vector()
+    p[layout.current] = current
+    p[layout.geometry] = (config.hull_radius_m, config.separation_m, *config.hull_offsets_m)
+    p[layout.segments] = np.asarray(segment_slots, float).reshape(-1)
+    return p
+
+
+# -- the OCP -------------------------------------------------------------------------------
+def dynamics_function(config: NmpcConfig) -> ca.Function:
+    """f_d: one shooting interval of Ts, RK4 in sub-steps on the smooth model; the slack
+    state takes the value of the input sigma (so stage i+1's slack is chosen at stage i)."""
+    x = ca.SX.sym("x", NX)
+    u = ca.SX.sym("u", NU)
+    p = ca.SX.sym("p", _NP)
+    current = ca.SX.sym("current", 2)
+    variant = Variant(smooth=True, eps=config.smooth_eps)
+    boat = rk4(lambda z: augmented_ode(z, u[:2], p, current, variant), x[:NX_BOAT],
+               config.step_s, config.rk4_substeps)
+    return ca.Function("f_d", [x, u, p, current], [ca.vertcat(boat, u[2])],
+                       ["x", "u", "p", "current"], ["x_next"])
+
+
+def hull_circles(x, offsets):
+    """Centres of the two hull circles for state x: offsets along the body x axis."""
+    c, s = ca.cos(x[2]), ca.sin(x[2])
+    return [(x[0] + d * c, x[1] + d * s) for d in offsets]
+
+
+def clearance_function(config: NmpcConfig) -> ca.Function:
+    """h >= 0 for each hull circle and segment slot at one stage (eq. mpc:pnorm, 4th root).
+
+    Slot = (x_c, y_c, theta, length, active); an inactive slot gives h = 1: strictly satisfied, so
+    an interior-point QP solver never sees a degenerate active row.
+    """
+    x = ca.SX.sym("x", NX)
+    slots = ca.SX.sym("slots", len(SLOT_FIELDS), config.segment_slots)  # a column per slot
+    geometry = ca.SX.sym("geometry", 4)  # R_b, d_p, offsets
+    Rb, dp = geometry[0], geometry[1]
+    s = x[NX - 1]
+    h = []
+    for px, py in hull_circles(x, [geometry[2], geometry[3]]):
+        for j in range(config.segment_slots):
+            xc, yc, th, length, active = (slots[k, j] for k in range(len(SLOT_FIELDS)))
+            dx, dy = px - xc, py - yc
+            X = (dx * ca.cos(th) + dy * ca.sin(th)) / (length / 2 + Rb + dp)
+            Y = (-dx * ca.sin(th) + dy * ca.cos(th)) / (Rb + dp + s)
+            h.append(active * ((X**4 + Y**4 + 1e-12) ** 0.25 - 1) + (1 - active))
+    return ca.Function("clearance", [x, slots, geometry], [ca.vertcat(*h)],
+                       ["x", "slots", "geometry"], ["h"])
+
+
+@dataclass(frozen=True)
+class Ocp:
+    """The NLP of the OCP over w = [x_0, u_0, x_1, u_1, ..., x_Np] (hpipm's stage order).
+
+    `constraints(w, p) -> g` is ordered [gap_0, gap_1, h_1, gap_2, h_2, ..., h_Np] with
+    gap_i = f_d(x_i, u_i) - x_{i+1}; equality rows are gaps, inequality rows h >= 0.
+    The cost is quadratic in w: 1/2 w' H w + g_r' w + const, with H constant.
+    """
+
+    config: NmpcConfig
+    nw: int
+    ng: int
+    n_gap: int  # rows per gap
+    n_h: int  # rows per stage of obstacle constraints
+    constraints: ca.Function  # (w, p) -> g
+    linearisation: ca.Function  # (w, p) -> (gaps, dgap_nz, h, dh_nz), stage by stage
+    dyn_sparsity: ca.Sparsity  # of d gap_k / d [x_k; u_k], NX x (NX + NU)
+    h_sparsity: ca.Sparsity  # of d h_k / d x_k, n_h x NX
+    jac_sparsity: ca.Sparsity  # of dg/dw
+    jac_gather: np.ndarray  # dg/dw nonzeros = [dgap_nz, dh_nz, -1][jac_gather]
+    dynamics: ca.Function
+    states_at: np.ndarray  # (Np+1, NX) indices of x_k in w
+    inputs_at: np.ndarray  # (Np, NU) indices of u_k in w
+
+    @property
+    def N(self) -> int:
+        return self.config.horizon
+
+    # -- indices ----------------------------------------------------------------------------
+    def state_index(self, k: int) -> slice:
+        return slice(k * (NX + NU), k * (NX + NU) + NX)
+
+    def input_index(self, k: int) -> slice:
+        start = k * (NX + NU) + NX
+        return slice(start, start + NU)
+
+    def unpack(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """w -> states (Np+1, 9), inputs (Np, 3)."""
+        w = np.asarray(w)
+        return w[self.states_at], w[self.inputs_at]
+
+    def pack(self, states: np.ndarray, inputs: np.ndarray) -> np.ndarray:
+        w = np.empty(self.nw)
+        w[self.states_at] = states
+        w[self.inputs_at] = inputs
+        return w
+
+    def assemble(self, gaps, dgap_nz, h, dh_nz) -> tuple[np.ndarray, np.ndarray]:
+        """g and the nonzeros of dg/dw (jac_sparsity's order) from the linearisation's outputs,
+        each flattened column by column (a column per stage), as a Function buffer gives them."""
+        N = self.N
+        gaps, h = np.reshape(gaps, (N, NX)).T, np.reshape(h, (N, self.n_h)).T
+        g = np.concatenate([gaps[:, 0], np.vstack([gaps[:, 1:], h[:, : N - 1]]).T.ravel(),
+                            h[:, N - 1]])
+        sources = np.concatenate([np.ravel(dgap_nz), np.ravel(dh_nz), [-1.0]])
+        return g, sources[self.jac_gather]
+
+    def gap_rows(self) -> np.ndarray:
+        """Boolean mask of equality (gap) rows in g."""
+        rows = np.zeros(self.ng, bool)
+        rows[: self.n_gap] = True
+        per = self.n_gap + self.n_h
+        for k in range(1, self.N):
+            start = self.n_gap + (k - 1) * per
+            rows[start:start + self.n_gap] = True
+        return rows
+
+    # -- cost -------------------------------------------------------------------------------
+    def hessian(self) -> np.ndarray:
+        """Diagonal of H (the cost is a sum of weighted squares: Gauss-Newton is exact)."""
+        c, eps = self.config, self.config.hessian_regularisation
+        d = np.zeros(self.nw)
+        for k in range(self.N + 1):
+            q = np.diag(c.Q_T if k == self.N else c.Q)
+            d[self.state_index(k)] = 2 * np.concatenate([q, [c.slack_weight if k else 0.0]])
+            if k < self.N:
+                d[self.input_index(k)] = 2 * np.array([*c.r_diag, 0.0])
+        return np.maximum(d, eps)
+
+    def reference_vector(self, reference_states: np.ndarray) -> np.ndarray:
+        """w_ref from r_0..r_Np as (Np+1, 8): zero inputs and slacks."""
+        states = np.zeros((self.N + 1, NX))
+        states[:, :NX_BOAT] = reference_states
+        return self.pack(states, np.zeros((self.N, NU)))
+
+    # -- bounds -----------------------------------------------------------------------------
+    def bounds(self, x_init: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """lbw, ubw: x_0 fixed (with slack 0), actuator, rate and slack bounds."""
+        c = self.config
+        lbx = np.array([-np.inf] * 6 + [-c.nT_max, -c.nS_max, c.slack_min_m])
+        ubx = np.array([np.inf] * 6 + [c.nT_max, c.nS_max, 0.0])
+        lbu = np.array([-c.dnT_max, -c.dnS_max, c.slack_min_m])
+        ubu = np.array([c.dnT_max, c.dnS_max, 0.0])
+        lbw = np.concatenate([np.tile(np.concatenate([lbx, lbu]), self.N), lbx])
+        ubw = np.concatenate([np.tile(np.concatenate([ubx, ubu]), self.N), ubx])
+        x0 = np.concatenate([x_init, [0.0]])
+        lbw[self.state_index(0)] = x0
+        ubw[self.state_index(0)] = x0
+        return lbw, ubw
+
+    def constraint_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        gaps = self.gap_rows()
+        return np.zeros(self.ng), np.where(gaps, 0.0, np.inf)
+
+    def hpipm_structure(self) -> dict:
+        """The stage sizes hpipm needs (N, nx, nu, ng), nu ending with 0."""
+        return {"N": self.N, "nx": [NX] * (self.N + 1), "nu": [NU] * self.N + [0],
+                "ng": [0] + [self.n_h] * self.N}
+
+
+def _with_jacobian(f: ca.Function, wrt: list[int]) -> tuple[ca.Function, ca.Sparsity]:
+    """f's first output and the nonzeros of its Jacobian with respect to inputs `wrt`, stacked.
+
+    Per-stage Jacobians stay small SX expressions; the OCP maps them over the horizon and
+    gathers the nonzeros into the big Jacobian's order, which keeps the generated C small.
+    """
+    args = f.sx_in()
+    out = f.call(args)[0]
+    jac = ca.jacobian(out, ca.vertcat(*[args[i] for i in wrt]))
+    name = f.name() + "_jac"
+    return ca.Function(name, args, [out, ca.vertcat(*jac.nonzeros())]), jac.sparsity()
+
+
+def _stage_blocks(sparsity: ca.Sparsity, row0: int, col0: int, src0: int):
+    """(rows, cols, source index) of a stage block's nonzeros in the big Jacobian."""
+    rows, cols = sparsity.get_triplet()
+    n = len(rows)
+    return np.asarray(rows) + row0, np.asarray(cols) + col0, np.arange(n) + src0
+
+
+def build_ocp(config: NmpcConfig) -> Ocp:
+    """Variables, dynamics, constraints and their Jacobian, as CasADi Functions of (w, p)."""
+    N = config.horizon
+    layout = ParamLayout(config.segment_slots)
+    nz = NX + NU  # variables per stage
+    nw = N * nz + NX
+    w = ca.MX.sym("w", nw)
+    p = ca.MX.sym("p", layout.size)
+
+    # variables, stage by stage: [x_k, u_k] for k < N, then x_N
+    main = ca.reshape(w[: N * nz], nz, N)
+    X = ca.horzcat(main[:NX, :], w[N * nz:])  # NX x (N+1)
+    U = main[NX:, :]  # NU x N
+
+    # dynamics, and its Jacobian with respect to [x_k; u_k]
+    f_d = dynamics_function(config)
+    f_d_jac, sp_dyn = _with_jacobian(f_d, [0, 1])
+    boat, current = p[layout.boat], p[layout.current]
+    X_next, AB = f_d_jac.map(N)(X[:, :N], U, ca.repmat(boat, 1, N), ca.repmat(current, 1, N))
+    gaps = X_next - X[:, 1:]  # NX x N: x_{k+1} = f_d(x_k, u_k) as gap_k = 0
+
+    # obstacle constraints at stages 1..N, and their Jacobian with respect to x_k
+    clearance = clearance_function(config)
+    clearance_jac, sp_h = _with_jacobian(clearance, [0])
+    slots = ca.reshape(p[layout.segments], len(SLOT_FIELDS), config.segment_slots)
+    H, C = clearance_jac.map(N)(X[:, 1:], ca.repmat(slots, 1, N),
+                                ca.repmat(p[layout.geometry], 1, N))  # n_h x N
+
+    # rows in hpipm's stage order: gap_0, then (gap_k, h_k) for k = 1..N-1, then h_N
+    n_h = 2 * config.segment_slots
+    g = ca.vertcat(gaps[:, 0], ca.vec(ca.vertcat(gaps[:, 1:], H[:, : N - 1])), H[:, N - 1])
+
+    # where each nonzero of dg/dw comes from: [A_k B_k] and -I per gap, C_k per stage
+    def gap_row(k):
+        return 0 if k == 0 else NX + (k - 1) * (NX + n_h)
+
+    def h_row(k):  # k = 1..N
+        return gap_row(k) + NX if k < N else gap_row(N - 1) + NX + n_h
+
+    n_ab, n_c = sp_dyn.nnz(), sp_h.nnz()
+    minus_one = N * n_ab + N * n_c  # source index of the constant -1
+    parts = []
+    for k in range(N):
+        parts.append(_stage_blocks(sp_dyn, gap_row(k), k * nz, k * n_ab))
+        idx = np.arange(NX)
+        parts.append((gap_row(k) + idx, (k + 1) * nz + idx, np.full(NX, minus_one)))
+        parts.append(_stage_blocks(sp_h, h_row(k + 1), (k + 1) * nz, N * n_ab + k * n_c))
+    rows, cols, src = (np.concatenate(a) for a in zip(*parts))
+    order = np.lexsort((rows, cols))  # column-major, as CasADi stores sparse matrices
+    jac_sparsity = ca.Sparsity.triplet(g.numel(), nw, rows[order].tolist(), cols[order].tolist())
+
+    return Ocp(
+        config=config, nw=nw, ng=g.numel(), n_gap=NX, n_h=n_h,
+        constraints=ca.Function("constraints", [w, p], [g], ["w", "p"], ["g"]),
+        linearisation=ca.Function("nmpc_linearisation", [w, p], [gaps, AB, H, C],
+                                  ["w", "p"], ["gaps", "dgap_nz", "h", "dh_nz"]),
+        dyn_sparsity=sp_dyn, h_sparsity=sp_h,
+        jac_sparsity=jac_sparsity, jac_gather=src[order],
+        dynamics=f_d,
+        states_at=np.array([np.arange(k * nz, k * nz + NX) for k in range(N + 1)]),
+        inputs_at=np.array([np.arange(k * nz + NX, (k + 1) * nz) for k in range(N)]),
+    )

@@ -1,0 +1,255 @@
+"""The NMPC as a controller: called every control period with the state estimate, the
+actuators, the segments and the waypoints; returns the commands and the plan.
+
+Per step: reference (forward from the previous progress), segment slots, warm start (the
+previous plan shifted by one control period), one solve (RTI by default), then the command
+`nT_0 + dnT_0 * dt`, `nS_0 + dnS_0 * dt`. A failed or non-finite solve is never passed on:
+the controller retries once from a safe guess (the reference itself), else follows the
+shifted previous plan, and after `max_failures` failed steps in a row raises `SolverError`:
+the caller must stop the boat.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import InputError, SolverError
+from .geometry import unwrap_near
+from .nmpc import NU, NX, NX_BOAT, NmpcConfig, build_ocp, pack_params
+from .reference import Reference, WaypointPath, reference_trajectory, waypoint_path
+from .rti import QpOptions, QpStep, SqpResult, sqp
+from .segment_slots import fill_segment_slots
+
+METHODS = ("rti", "sqp", "ipopt")
+
+
+@dataclass(frozen=True)
+class SolverStats:
+    """What one control step's solve did and what it cost (seconds of wall clock)."""
+
+    method: str
+    ok: bool  # the plan is a fresh solution (False: a fallback plan was used)
+    converged: bool  # SQP/IPOPT reached their tolerance (RTI: False by design)
+    status: str
+    fallback: str  # "", "safe_guess" (retry succeeded) or "shifted_plan"
+    sqp_iterations: int
+    qp_iterations: int
+    consecutive_failures: int
+    time_total_s: float
+    time_linearisation_s: float
+    time_qp_s: float
+
+    @property
+    def time_glue_s(self) -> float:
+        """Everything else: reference, segment slots, warm start, Python."""
+        return self.time_total_s - self.time_linearisation_s - self.time_qp_s
+
+
+@dataclass(frozen=True)
+class NmpcStep:
+    """One control step: the commands to send now and the plan behind them."""
+
+    command: np.ndarray  # [nT, nS] in %, to send now
+    rates: np.ndarray  # [dnT_0, dnS_0] in %/s
+    states: np.ndarray  # predicted [x, y, psi, u, v, r, nT, nS] at stages 0..Np, (Np+1, 8)
+    inputs: np.ndarray  # planned [dnT, dnS] at stages 0..Np-1, (Np, 2)
+    slack_m: np.ndarray  # s_1..s_Np in m (<= 0: how much the clearance was given up)
+    reference: Reference
+    stats: SolverStats
+
+    @property
+    def max_slack_m(self) -> float:
+        """The largest clearance given up over the horizon, in m (>= 0)."""
+        return float(-self.slack_m.min()) if self.slack_m.size else 0.0
+
+
+def _finite_vector(value, size: int, what: str) -> np.ndarray:
+    try:
+        arr = np.asarray(value, float).reshape(-1)
+    except (TypeError, ValueError):
+        raise InputError(f"{what}: expected {size} numbers, got {value!r}") from None
+    if arr.size != size:
+        raise InputError(f"{what}: expected {size} numbers, got {arr.size}")
+    if not np.isfinite(arr).all():
+        raise InputError(f"{what}: contains NaN or infinity: {arr.tolist()}")
+    return arr
+
+
+class NmpcController:
+    """The paper's NMPC, solved by real-time iteration ("rti"), SQP to convergence ("sqp")
+    or IPOPT ("ipopt"). `compiled` uses the cached C linearisation (RTI, SQP)."""
+
+    def __init__(self, config: NmpcConfig = NmpcConfig(), method: str = "rti",
+                 qp: QpOptions = QpOptions(), compiled: bool = True, sqp_max_iter: int = 50,
+                 sqp_tol: float = 1e-3, max_failures: int = 3,
+                 reference_search_ahead_m: float = 50.0):
+        if method not in METHODS:
+            raise InputError(f"NMPC method {method!r}: choose one of {', '.join(METHODS)}")
+        if max_failures < 1:
+            raise InputError(f"max_failures: must be at least 1, got {max_failures!r}")
+        self.config, self.method = config, method
+        self.max_failures, self.sqp_max_iter, self.sqp_tol = max_failures, sqp_max_iter, sqp_tol
+        self.search_ahead_m = reference_search_ahead_m
+        self.ocp = build_ocp(config)
+        self.compiled_info = None
+        if method == "ipopt":
+            from .ipopt import IpoptSolver
+
+            self._ipopt = IpoptSolver(self.ocp)
+        else:
+            linearisation = self.ocp.linearisation
+            if compiled:
+                from .codegen_cache import compile_cached
+
+                self.compiled_info = compile_cached(linearisation)
+                linearisation = self.compiled_info.function
+            self._qp = QpStep(self.ocp, linearisation, qp)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the plan, the progress along the path and the failure count."""
+        self._plan: np.ndarray | None = None
+        self._progress_m = 0.0
+        self._path: WaypointPath | None = None
+        self._waypoints: np.ndarray | None = None
+        self._waypoints_given = None
+        self.consecutive_failures = 0
+
+    # -- the step ---------------------------------------------------------------------------
+    def step(self, state, actuators, segments, waypoints, target_speed_mps: float,
+             current=(0.0, 0.0)) -> NmpcStep:
+        """One control period.
+
+        state: [x, y, psi, u, v, r] (NED m, rad, body m/s, rad/s); actuators: the current
+        [nT, nS] in %; segments: (M, 4) rows (x_c, y_c, theta, length); waypoints: (K, 2);
+        current: water current [north, east] in m/s.
+        """
+        t0 = time.perf_counter()
+        c = self.config
+        x = _finite_vector(state, 6, "state [x, y, psi, u, v, r]")
+        act = _finite_vector(actuators, 2, "actuators [nT, nS]")
+        act = np.clip(act, [-c.nT_max, -c.nS_max], [c.nT_max, c.nS_max])
+        current = _finite_vector(current, 2, "current [north, east]")
+        self._set_path(waypoints)
+
+        guess = self._shifted_plan()
+        if guess is not None:
+            x[2] = float(unwrap_near(x[2], guess[self.ocp.state_index(0)][2]))
+        reference = reference_trajectory(self._path, x[:2], x[2], target_speed_mps, c.horizon,
+                                         c.step_s, self._progress_m, self.search_ahead_m)
+        slots = fill_segment_slots(segments, x[:2], c.segment_slots, c.segment_range_m)
+        p = pack_params(c, slots, current)
+        x_init = np.concatenate([x, act])
+        lbw, ubw = self.ocp.bounds(x_init)
+        w_ref = self.ocp.reference_vector(reference.states)
+
+        fallback = ""
+        if guess is None:
+            guess = self._safe_guess(x_init, reference)
+            result = self._solve(self._start_at(guess, x_init), p, w_ref, lbw, ubw)
+        else:
+            result = self._solve(self._start_at(guess, x_init), p, w_ref, lbw, ubw)
+            if not result.ok:
+                retry = self._solve(self._safe_guess(x_init, reference), p, w_ref, lbw, ubw)
+                result = self._merge(result, retry)
+                fallback = "safe_guess" if retry.ok else ""
+        if result.ok:
+            self.consecutive_failures = 0
+            plan = result.w
+        else:
+            self.consecutive_failures += 1
+            if self.consecutive_failures >= self.max_failures:
+                self._plan = None
+                raise SolverError(
+                    f"NMPC ({self.method}) failed {self.consecutive_failures} steps in a row "
+                    f"(last: {result.status}); stop the boat")
+            fallback = "shifted_plan"
+            plan = self._start_at(guess, x_init)
+        self._plan = plan
+        self._progress_m = reference.progress_m
+        return self._output(plan, act, reference, result, fallback, t0)
+
+    # -- pieces -----------------------------------------------------------------------------
+    def _set_path(self, waypoints) -> None:
+        """A new waypoint list restarts the progress along the path; the same one keeps it."""
+        if self._waypoints is not None and waypoints is self._waypoints_given:
+            return
+        path = waypoint_path(waypoints)
+        if self._waypoints is not None and np.array_equal(path.polyline.points, self._waypoints):
+            self._waypoints_given = waypoints
+            return
+        self._path, self._waypoints = path, path.polyline.points
+        self._waypoints_given = waypoints
+        self._progress_m = 0.0
+
+    def _solve(self, w, p, w_ref, lbw, ubw) -> SqpResult:
+        if self.method == "ipopt":
+            return self._ipopt.solve(w, p, w_ref, lbw, ubw)
+        max_iter = 1 if self.method == "rti" else self.sqp_max_iter
+        result = sqp(self._qp, w, p, w_ref, lbw, ubw, max_iter, self.sqp_tol)
+        if result.ok and not self._plausible(result.w, lbw, ubw):
+            return SqpResult(w, False, False, "implausible solution (bounds violated)",
+                             result.sqp_iterations, result.qp_iterations, result.step_norm,
+                             result.time_linearisation_s, result.time_qp_s)
+        return result
+
+    @staticmethod
+    def _plausible(w, lbw, ubw, tol: float = 1e-3) -> bool:
+        """A QP that claims success can still return garbage: check it is finite and bounded."""
+        return bool(np.isfinite(w).all() and (w >= lbw - tol).all() and (w <= ubw + tol).all())
+
+    @staticmethod
+    def _merge(first: SqpResult, retry: SqpResult) -> SqpResult:
+        """The retry's outcome, with both attempts' iterations and times."""
+        return SqpResult(retry.w, retry.ok, retry.converged,
+                         retry.status if retry.ok else f"{first.status}; retry: {retry.status}",
+                         first.sqp_iterations + retry.sqp_iterations,
+                         first.qp_iterations + retry.qp_iterations, retry.step_norm,
+                         first.time_linearisation_s + retry.time_linearisation_s,
+                         first.time_qp_s + retry.time_qp_s)
+
+    def _shifted_plan(self) -> np.ndarray | None:
+        """The previous plan moved forward by one control period (linear interpolation)."""
+        if self._plan is None:
+            return None
+        c = self.config
+        tau = c.control_period_s / c.step_s
+        states, inputs = self.ocp.unpack(self._plan)
+        ahead_states = np.vstack([states[1:], 2 * states[-1] - states[-2]])
+        ahead_inputs = np.vstack([inputs[1:], inputs[-1:]])
+        return self.ocp.pack(states + tau * (ahead_states - states),
+                             inputs + tau * (ahead_inputs - inputs))
+
+    def _start_at(self, w: np.ndarray, x_init: np.ndarray) -> np.ndarray:
+        w = w.copy()
+        w[self.ocp.state_index(0)] = np.concatenate([x_init, [0.0]])
+        return w
+
+    def _safe_guess(self, x_init: np.ndarray, reference: Reference) -> np.ndarray:
+        """The reference itself, holding the throttle and centring the steering, no slack."""
+        states = np.zeros((self.config.horizon + 1, NX))
+        states[:, :4] = reference.states[:, :4]
+        states[:, 6] = x_init[6]
+        states[0, :NX_BOAT] = x_init
+        return self.ocp.pack(states, np.zeros((self.config.horizon, NU)))
+
+    def _output(self, plan, act, reference, result: SqpResult, fallback: str,
+                t0: float) -> NmpcStep:
+        c = self.config
+        states, inputs = self.ocp.unpack(plan)
+        rate_max = np.array([c.dnT_max, c.dnS_max])
+        rates = np.clip(inputs[0, :2], -rate_max, rate_max)
+        command = np.clip(act + rates * c.control_period_s, [-c.nT_max, -c.nS_max],
+                          [c.nT_max, c.nS_max])
+        stats = SolverStats(
+            method=self.method, ok=result.ok, converged=result.converged, status=result.status,
+            fallback=fallback, sqp_iterations=result.sqp_iterations,
+            qp_iterations=result.qp_iterations,
+            consecutive_failures=self.consecutive_failures,
+            time_total_s=time.perf_counter() - t0,
+            time_linearisation_s=result.time_linearisation_s, time_qp_s=result.time_qp_s)
+        return NmpcStep(command, rates, states[:, :NX_BOAT].copy(), inputs[:, :2].copy(),
+                        states[1:, NX - 1].copy(), reference, stats)

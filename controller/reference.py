@@ -1,0 +1,118 @@
+"""The NMPC's reference r_0..r_Np from a waypoint polyline and a target speed (DESIGN.md).
+
+r_0 is the closest point on the path, searched forward from the previous progress so that an
+S-bend cannot pull it back; r_i lies i * Ts * u_r further along the polyline, across legs,
+with the heading of the leg it falls on unwrapped against the boat's heading, and stops at the
+last waypoint (speed 0 there). The paper advanced along the current leg only, which at a bend
+runs into the outer wall within the 50 m horizon.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import InputError
+from .geometry import Polyline, unwrap_near
+
+
+@dataclass(frozen=True)
+class Reference:
+    """r_0..r_Np as rows [x, y, psi, u, 0, 0, 0, 0], and the progress of r_0 along the path."""
+
+    states: np.ndarray  # (Np + 1, 8)
+    progress_m: float  # arc length of r_0
+    cross_track_m: float  # distance from the boat to r_0
+    at_end: bool  # r_0 is the last waypoint
+
+
+@dataclass(frozen=True)
+class WaypointPath:
+    """A waypoint Polyline with its arc lengths and leg headings computed once: the reference
+    is queried every control period."""
+
+    polyline: Polyline
+    start: np.ndarray  # (L, 2) leg starts
+    delta: np.ndarray  # (L, 2) leg vectors
+    leg_length: np.ndarray  # (L,)
+    cumulative: np.ndarray  # (L + 1,) arc length at each waypoint
+    heading: np.ndarray  # (L,) rad, unwrapped along the path (no 2 pi jumps between legs)
+
+    @classmethod
+    def from_polyline(cls, polyline: Polyline) -> "WaypointPath":
+        pts = polyline.points
+        delta = np.diff(pts, axis=0)
+        lengths = np.hypot(delta[:, 0], delta[:, 1])
+        return cls(polyline, pts[:-1].copy(), delta, lengths,
+                   np.concatenate([[0.0], np.cumsum(lengths)]),
+                   np.unwrap(np.arctan2(delta[:, 1], delta[:, 0])))
+
+    @property
+    def length(self) -> float:
+        return float(self.cumulative[-1])
+
+    def project(self, point, s_min: float = 0.0, s_max: float | None = None) -> tuple[float, float]:
+        """(s, distance) of the closest point with arc length in [s_min, s_max]."""
+        cum = self.cumulative
+        s_max = cum[-1] if s_max is None else min(s_max, cum[-1])
+        s_min = min(s_min, s_max)
+        lo, hi = np.maximum(cum[:-1], s_min), np.minimum(cum[1:], s_max)
+        legs = np.nonzero(lo <= hi)[0]
+        d = np.asarray(point, float)[:2] - self.start[legs]
+        t = np.einsum("ij,ij->i", d, self.delta[legs]) / self.leg_length[legs] ** 2
+        s = np.clip(cum[legs] + np.clip(t, 0.0, 1.0) * self.leg_length[legs], lo[legs], hi[legs])
+        xy = self.at(s)[0]
+        dist = np.hypot(*(xy - np.asarray(point, float)[:2]).T)
+        i = int(np.argmin(dist))
+        return float(s[i]), float(dist[i])
+
+    def at(self, s) -> tuple[np.ndarray, np.ndarray]:
+        """Points (n, 2) and leg headings (n,) at arc lengths s, clamped to the ends."""
+        s = np.clip(np.atleast_1d(np.asarray(s, float)), 0.0, self.cumulative[-1])
+        i = np.clip(np.searchsorted(self.cumulative, s, side="right") - 1, 0,
+                    len(self.leg_length) - 1)
+        t = (s - self.cumulative[i]) / self.leg_length[i]
+        return self.start[i] + t[:, None] * self.delta[i], self.heading[i]
+
+
+def waypoint_path(waypoints) -> WaypointPath:
+    """The path through (K, 2) waypoints, with clear errors; repeated points are dropped."""
+    if isinstance(waypoints, Polyline):
+        waypoints = waypoints.points
+    try:
+        pts = np.asarray(waypoints, float)
+    except (TypeError, ValueError):
+        raise InputError("waypoints: expected a (K, 2) array of (x, y) in metres") from None
+    if pts.size == 0:
+        raise InputError("waypoints: the list is empty; give at least two points")
+    if pts.ndim != 2 or pts.shape[1] != 2:
+        raise InputError(f"waypoints: expected shape (K, 2), got {pts.shape}")
+    if not np.isfinite(pts).all():
+        raise InputError("waypoints: contain a NaN or infinite coordinate")
+    keep = np.concatenate([[True], np.hypot(*np.diff(pts, axis=0).T) > 1e-9])
+    pts = pts[keep]
+    if len(pts) < 2:
+        raise InputError("waypoints: need at least two distinct points")
+    return WaypointPath.from_polyline(Polyline(pts))
+
+
+def reference_trajectory(path: WaypointPath, position, heading_rad: float, speed_mps: float,
+                         horizon: int, step_s: float, progress_m: float = 0.0,
+                         search_ahead_m: float | None = None) -> Reference:
+    """r_0..r_horizon for a boat at `position` with `heading_rad`.
+
+    The closest point is searched on arc lengths [progress_m, progress_m + search_ahead_m]
+    (the whole rest of the path if None): forward only, so the reference never runs back.
+    """
+    if not np.isfinite(speed_mps) or speed_mps < 0:
+        raise InputError(f"target speed: must be a non-negative number of m/s, got {speed_mps!r}")
+    s_max = None if search_ahead_m is None else progress_m + search_ahead_m
+    s0, distance = path.project(position, s_min=progress_m, s_max=s_max)
+    s = s0 + speed_mps * step_s * np.arange(horizon + 1)
+    xy, psi = path.at(s)  # leg headings, already continuous along the path
+    psi = psi + (unwrap_near(psi[0], heading_rad) - psi[0])  # the turn nearest the boat's
+    states = np.zeros((horizon + 1, 8))
+    states[:, 0:2], states[:, 2] = xy, psi
+    states[:, 3] = np.where(s < path.length, speed_mps, 0.0)
+    return Reference(states, float(s0), float(distance), bool(s0 >= path.length - 1e-9))

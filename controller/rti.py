@@ -1,0 +1,253 @@
+"""Sequential quadratic programming on the OCP: one step per control period (real-time
+iteration, as the paper's ACADO RTI), or iterated to convergence.
+
+Each SQP step solves the Gauss-Newton QP around the current guess w:
+
+    min_dw  1/2 dw' H dw + (H (w - w_ref))' dw
+    s.t.    lbg - g(w) <= J(w) dw <= ubg - g(w),   lbw - w <= dw <= ubw - w
+
+The cost is a sum of weighted squares, so H is constant and Gauss-Newton is its exact Hessian.
+g and J come from one CasADi Function (compiled C when possible, see `codegen_cache`), called
+through `Function.buffer()`, which skips CasADi's argument conversion (about 60 us a call from
+numpy, against 3 us).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from .errors import InputError
+from .nmpc import NU, NX, Ocp
+
+QP_SOLVERS = ("hpipm", "hpipm-casadi", "piqp")
+"""hpipm: HPIPM's OCP solver called directly with the stage blocks (`hpipm_qp`);
+hpipm-casadi and piqp: through CasADi's conic interface, from the sparse QP."""
+
+
+@dataclass(frozen=True)
+class QpOptions:
+    """The QP solver and its settings (measured choices, see `canalnav bench nmpc`)."""
+
+    solver: str = "hpipm"
+    hpipm_mode: str = "speed_abs"  # absolute IPM: about half the iterations of "speed" here
+    tol: float = 1e-6  # on HPIPM's residuals (direct hpipm only)
+    iter_max: int = 50
+    inf: float = 1e4  # stand-in for a missing bound; CasADi's default 1e8 breaks hpipm
+
+    def __post_init__(self) -> None:
+        if self.solver not in QP_SOLVERS:
+            raise InputError(f"QP solver {self.solver!r}: choose one of {', '.join(QP_SOLVERS)}")
+        if self.iter_max < 1:
+            raise InputError(f"QP iter_max: must be positive, got {self.iter_max!r}")
+        if not self.tol > 0:
+            raise InputError(f"QP tol: must be positive, got {self.tol!r}")
+
+
+@dataclass(frozen=True)
+class QpStepResult:
+    """One SQP step: the step dw, whether the QP solver vouched for it, and what it cost."""
+
+    dw: np.ndarray
+    ok: bool
+    status: str
+    qp_iterations: int
+    time_linearisation_s: float
+    time_qp_s: float
+
+
+def _bind(function: ca.Function, inputs: list[np.ndarray]):
+    """A buffer of `function` bound to numpy arrays: write the inputs in place, then call."""
+    buf, trigger = function.buffer()
+    for i, array in enumerate(inputs):
+        buf.set_arg(i, memoryview(array))
+    outputs = [np.zeros(function.nnz_out(i)) for i in range(function.n_out())]
+    for i, array in enumerate(outputs):
+        buf.set_res(i, memoryview(array))
+    return buf, trigger, outputs
+
+
+class QpStep:
+    """The linearise-and-solve step of SQP, with its buffers set up once."""
+
+    def __init__(self, ocp: Ocp, linearisation: ca.Function, options: QpOptions = QpOptions()):
+        self.ocp, self.options = ocp, options
+        N, n = ocp.N, ocp.nw
+        self.hessian = ocp.hessian()
+        self.lbg, self.ubg = ocp.constraint_bounds()
+        self.states_at, self.inputs_at = ocp.states_at, ocp.inputs_at
+        self.x0_at = self.states_at[0]
+
+        # linearisation: (w, p) -> stagewise pieces; keep the Function alive with its buffer
+        self.linearisation = linearisation
+        self.w = np.zeros(n)
+        self.p = np.zeros(linearisation.nnz_in(1))
+        self._lin_buf, self._lin, self.pieces = _bind(linearisation, [self.w, self.p])
+
+        if options.solver == "hpipm":
+            self._init_hpipm()
+        else:
+            self._init_conic()
+
+    # -- HPIPM directly, stage by stage -------------------------------------------------------
+    def _init_hpipm(self) -> None:
+        from .hpipm_qp import HpipmOcpQp
+
+        ocp, o = self.ocp, self.options
+        N, nx, nu, nh = ocp.N, NX, NU, ocp.n_h
+        self.bounded_states = np.array([6, 7, 8])  # nT, nS, slack
+        self.qp = HpipmOcpQp(N, nx, nu, nh, self.bounded_states, np.arange(nu),
+                             self.hessian[self.states_at], self.hessian[self.inputs_at],
+                             o.hpipm_mode, o.iter_max, o.tol)
+        rows, cols = (np.asarray(v) for v in ocp.dyn_sparsity.get_triplet())
+        self._in_A = cols < nx
+        self._A_at = cols[self._in_A] * nx + rows[self._in_A]
+        self._B_at = (cols[~self._in_A] - nx) * nx + rows[~self._in_A]
+        rows, cols = (np.asarray(v) for v in ocp.h_sparsity.get_triplet())
+        self._C_at = cols * nh + rows
+        self.qp.ug[:] = o.inf
+
+    def _solve_hpipm(self, w, w_ref, lbw, ubw) -> tuple[np.ndarray, bool, str, int]:
+        N, qp = self.ocp.N, self.qp
+        gaps, dgap, h, dh = self.pieces
+        dgap = dgap.reshape(N, -1)
+        qp.A[:, self._A_at] = dgap[:, self._in_A]
+        qp.B[:, self._B_at] = dgap[:, ~self._in_A]
+        qp.b[:] = gaps.reshape(N, NX)
+        qp.C[1:, self._C_at] = dh.reshape(N, -1)
+        np.negative(h.reshape(N, -1), out=qp.lg[1:])
+        grad = self.hessian * (w - w_ref)
+        qp.q[:] = grad[self.states_at]
+        qp.r[:] = grad[self.inputs_at]
+        lo, hi = lbw - w, ubw - w
+        qp.lbx[:] = lo[self.states_at[:, self.bounded_states]]
+        qp.ubx[:] = hi[self.states_at[:, self.bounded_states]]
+        qp.lbu[:] = lo[self.inputs_at]
+        qp.ubu[:] = hi[self.inputs_at]
+        status, iterations = qp.solve()
+        dw = np.zeros_like(w)
+        dw[self.states_at[1:]] = qp.x[1:]
+        dw[self.inputs_at] = qp.u
+        from .hpipm_qp import STATUS
+
+        return dw, status == 0, STATUS.get(status, str(status)), iterations
+
+    # -- any QP solver through CasADi's conic interface ---------------------------------------
+    def _init_conic(self) -> None:
+        ocp, o = self.ocp, self.options
+        qp = {"h": ca.Sparsity.diag(ocp.nw), "a": ocp.jac_sparsity}
+        opts: dict = {"error_on_fail": False}
+        if o.solver == "hpipm-casadi":
+            opts.update(ocp.hpipm_structure())
+            opts.update({"inf": o.inf, "hpipm": {"mode": o.hpipm_mode, "iter_max": o.iter_max}})
+            plugin = "hpipm"
+        else:
+            opts.update({"piqp": {"max_iter": o.iter_max}})
+            plugin = "piqp"
+        # called the ordinary way: a Function buffer of this solver corrupts the heap (CasADi
+        # 3.8.2), and converting the arguments costs about 1 ms a call
+        self.solver = ca.conic("nmpc_qp", plugin, qp, opts)
+        self._h = ca.DM(ca.Sparsity.diag(ocp.nw), self.hessian)
+
+    def _solve_conic(self, w, w_ref, lbw, ubw) -> tuple[np.ndarray, bool, str, int]:
+        g, jac_nz = self.ocp.assemble(*self.pieces)
+        out = self.solver(h=self._h, g=self.hessian * (w - w_ref),
+                          a=ca.DM(self.ocp.jac_sparsity, jac_nz), lba=self.lbg - g,
+                          uba=self.ubg - g, lbx=lbw - w, ubx=ubw - w)
+        stats = self.solver.stats()
+        status = str(stats.get("return_status", stats.get("unified_return_status", "")))
+        return (np.asarray(out["x"]).ravel(), bool(stats.get("success", False)), status,
+                int(stats.get("iter_count", -1)))
+
+    # -- the merit of a guess ------------------------------------------------------------------
+    def merit(self, w: np.ndarray, p: np.ndarray, w_ref: np.ndarray,
+              weight: float) -> tuple[float, float]:
+        """(cost + weight * infeasibility, infeasibility): the L1 merit of SQP's line search."""
+        self.w[:] = w
+        self.p[:] = p
+        self._lin()
+        gaps, _, h, _ = self.pieces
+        infeasibility = float(np.abs(gaps).sum() + np.maximum(-h, 0.0).sum())
+        e = w - w_ref
+        return 0.5 * float(e @ (self.hessian * e)) + weight * infeasibility, infeasibility
+
+    # -- the step -----------------------------------------------------------------------------
+    def solve(self, w: np.ndarray, p: np.ndarray, w_ref: np.ndarray, lbw: np.ndarray,
+              ubw: np.ndarray) -> QpStepResult:
+        """One Gauss-Newton step from w. x_0 is fixed by lbw = ubw; w's x_0 is set to it."""
+        t0 = time.perf_counter()
+        w_caller, w = w, np.array(w, float)
+        w[self.x0_at] = lbw[self.x0_at]
+        self.w[:] = w
+        self.p[:] = p
+        self._lin()
+        t1 = time.perf_counter()
+        solve = self._solve_hpipm if self.options.solver == "hpipm" else self._solve_conic
+        dw, ok, status, iterations = solve(w, w_ref, lbw, ubw)
+        t2 = time.perf_counter()
+        ok = ok and bool(np.isfinite(dw).all())
+        return QpStepResult(dw + (w - w_caller), ok, status, iterations, t1 - t0, t2 - t1)
+
+@dataclass(frozen=True)
+class SqpResult:
+    """The outcome of one solve of the OCP by SQP (one step for RTI)."""
+
+    w: np.ndarray
+    ok: bool
+    converged: bool
+    status: str
+    sqp_iterations: int
+    qp_iterations: int
+    step_norm: float
+    time_linearisation_s: float
+    time_qp_s: float
+
+
+MERIT_WEIGHT = 1e5
+"""L1 penalty on constraint violation in SQP's merit: above the largest multiplier seen here
+(slack weight 1e4 per m^2, terminal heading weight 2.5e4)."""
+
+
+def sqp(step: QpStep, w: np.ndarray, p: np.ndarray, w_ref: np.ndarray, lbw: np.ndarray,
+        ubw: np.ndarray, max_iter: int = 1, tol: float = 1e-4) -> SqpResult:
+    """Gauss-Newton SQP from w: max_iter=1 is the real-time iteration (one full step).
+
+    Iterated, it backtracks along each step on an L1 merit function (full steps alone can
+    cycle near active obstacle constraints), and has converged when the largest component of
+    the accepted step is below `tol`. A failed QP stops it and returns the last guess with
+    ok=False.
+    """
+    w = np.array(w, float)
+    x0 = step.x0_at
+    w[x0] = lbw[x0]
+    t_lin = t_qp = 0.0
+    qp_iters, norm, status = 0, np.inf, ""
+    for k in range(1, max_iter + 1):
+        r = step.solve(w, p, w_ref, lbw, ubw)
+        t_lin += r.time_linearisation_s
+        t_qp += r.time_qp_s
+        qp_iters += max(r.qp_iterations, 0)
+        status = r.status
+        if not r.ok:
+            return SqpResult(w, False, False, f"QP failed ({r.status})", k, qp_iters, norm,
+                             t_lin, t_qp)
+        alpha = 1.0
+        if max_iter > 1:
+            t0 = time.perf_counter()
+            phi, infeasibility = step.merit(w, p, w_ref, MERIT_WEIGHT)
+            e = w - w_ref
+            slope = float((step.hessian * e) @ r.dw) - MERIT_WEIGHT * infeasibility
+            while alpha > 1.0 / 64:
+                trial, _ = step.merit(w + alpha * r.dw, p, w_ref, MERIT_WEIGHT)
+                if trial <= phi + 1e-4 * alpha * min(slope, 0.0):
+                    break
+                alpha *= 0.5
+            t_lin += time.perf_counter() - t0
+        w = w + alpha * r.dw
+        norm = float(np.max(np.abs(alpha * r.dw)))
+        if norm < tol:
+            return SqpResult(w, True, True, status, k, qp_iters, norm, t_lin, t_qp)
+    return SqpResult(w, True, False, status, max_iter, qp_iters, norm, t_lin, t_qp)

@@ -1,0 +1,88 @@
+"""The NMPC's reference: forward search, across legs, unwrapped heading, stop at the end."""
+
+import math
+
+import numpy as np
+import pytest
+
+from controller.errors import InputError
+from controller.reference import reference_trajectory, waypoint_path
+
+NP, TS = 25, 1.0
+
+
+def test_straight_path_reference_advances_at_target_speed():
+    path = waypoint_path([[0, 0], [200, 0]])
+    ref = reference_trajectory(path, [10.0, 3.0], 0.0, 2.0, NP, TS)
+    assert ref.progress_m == pytest.approx(10.0)
+    assert ref.cross_track_m == pytest.approx(3.0)
+    assert np.allclose(ref.states[:, 0], 10.0 + 2.0 * np.arange(NP + 1))
+    assert np.allclose(ref.states[:, 1], 0.0)
+    assert np.allclose(ref.states[:, 3], 2.0)
+    assert np.allclose(ref.states[:, 4:], 0.0)
+
+
+def test_reference_runs_across_legs_with_each_legs_heading():
+    # north 20 m, then east: the 50 m horizon crosses the corner
+    path = waypoint_path([[0, 0], [20, 0], [20, 100]])
+    ref = reference_trajectory(path, [10.0, 0.0], 0.0, 2.0, NP, TS)
+    xy, psi = ref.states[:, :2], ref.states[:, 2]
+    before = xy[:, 0] < 20 - 1e-9
+    assert np.allclose(psi[before], 0.0)
+    assert np.allclose(psi[~before], math.pi / 2)
+    # r_10 is 20 m along: 10 m to the corner, then 10 m east
+    assert xy[10] == pytest.approx([20.0, 10.0])
+
+
+def test_forward_search_keeps_an_s_bend_from_jumping_back():
+    # a hairpin: out north 50 m, back south 4 m to the east; the boat on the way out is
+    # nearer the return leg's later part than nothing - but progress keeps it on leg one
+    path = waypoint_path([[0, 0], [50, 0], [50, 4], [0, 4]])
+    ref = reference_trajectory(path, [40.0, 3.0], 0.0, 2.0, NP, TS, progress_m=35.0,
+                               search_ahead_m=20.0)
+    assert ref.progress_m == pytest.approx(40.0)  # on the outbound leg, not the return one
+    unconstrained = reference_trajectory(path, [40.0, 3.0], 0.0, 2.0, NP, TS)
+    assert unconstrained.progress_m > 54  # what a plain closest-point search would pick
+    # and progress never runs backwards even when the boat falls behind it
+    behind = reference_trajectory(path, [30.0, 0.0], 0.0, 2.0, NP, TS, progress_m=35.0,
+                                  search_ahead_m=20.0)
+    assert behind.progress_m == pytest.approx(35.0)
+
+
+def test_heading_is_unwrapped_against_the_boats_heading():
+    # a path heading south (psi = pi), boat heading just below pi or at -pi + 0.05
+    path = waypoint_path([[100, 0], [0, 0]])
+    for boat in (math.pi - 0.05, -math.pi + 0.05, 3 * math.pi - 0.05):
+        ref = reference_trajectory(path, [90.0, 0.0], boat, 2.0, NP, TS)
+        assert abs(ref.states[0, 2] - boat) < 0.1
+    # through a turn across +-pi the reference heading stays continuous
+    turn = waypoint_path([[0, 0], [-20, 1], [-40, -1]])
+    ref = reference_trajectory(turn, [-5.0, 0.2], math.pi, 2.0, NP, TS)
+    assert np.abs(np.diff(ref.states[:, 2])).max() < 0.2
+
+
+def test_reference_stops_at_the_last_waypoint():
+    path = waypoint_path([[0, 0], [30, 0]])
+    ref = reference_trajectory(path, [20.0, 0.0], 0.0, 2.0, NP, TS)
+    assert np.allclose(ref.states[6:, 0], 30.0)
+    assert np.allclose(ref.states[5:, 3], 0.0)  # speed 0 from the end on
+    assert ref.states[4, 3] == 2.0
+    end = reference_trajectory(path, [35.0, 0.0], 0.0, 2.0, NP, TS)
+    assert end.at_end and np.allclose(end.states[:, 0], 30.0)
+
+
+@pytest.mark.parametrize("waypoints, words", [
+    ([], "empty"),
+    ([[0.0, 0.0]], "two distinct"),
+    ([[0.0, 0.0], [0.0, 0.0]], "two distinct"),
+    ([[0.0, 0.0], [float("nan"), 1.0]], "NaN"),
+    ([1.0, 2.0, 3.0], "shape"),
+])
+def test_bad_waypoints_are_clear_errors(waypoints, words):
+    with pytest.raises(InputError, match=words):
+        waypoint_path(waypoints)
+
+
+def test_negative_target_speed_is_an_error():
+    with pytest.raises(InputError, match="target speed"):
+        reference_trajectory(waypoint_path([[0, 0], [1, 0]]), [0, 0], 0.0, -1.0, NP, TS)
