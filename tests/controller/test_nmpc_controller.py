@@ -1,0 +1,211 @@
+"""The NMPC in closed loop on the smooth model: clearance, the narrow stretch, speed, bounds,
+cold start, the code cache, bad input and failure handling (issue 5, "Must show")."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from controller.errors import InputError, SolverError
+from controller.nmpc import NmpcConfig
+from controller.nmpc_bench import closed_loop, open_water, straight_canal
+from controller.nmpc_controller import NmpcController
+from controller.rti import QpOptions, QpStepResult
+
+CFG = NmpcConfig()
+SAFE = CFG.hull_radius_m + CFG.separation_m  # 5 m
+X0 = np.array([0.0, 0.0, 0.0, 2.0, 0.0, 0.0])
+ACT0 = np.array([47.0, 0.0])  # about 2 m/s steady
+
+
+@pytest.fixture(scope="module")
+def rti():
+    return NmpcController(CFG, method="rti")
+
+
+def check_bounds(run, cfg=CFG):
+    """Commands and plans inside |n| <= 100 %, and commands move at most the rate limits."""
+    tol = 1e-6
+    cmds = np.array([s.command for s in run.steps])
+    assert np.all(np.abs(cmds[:, 0]) <= cfg.nT_max + tol)
+    assert np.all(np.abs(cmds[:, 1]) <= cfg.nS_max + tol)
+    rates = (cmds - run.actuators[:-1]) / cfg.control_period_s
+    assert np.all(np.abs(rates[:, 0]) <= cfg.dnT_max + 1e-6)
+    assert np.all(np.abs(rates[:, 1]) <= cfg.dnS_max + 1e-6)
+    for s in run.steps:
+        assert np.all(np.abs(s.states[:, 6]) <= cfg.nT_max + 1e-3)
+        assert np.all(np.abs(s.states[:, 7]) <= cfg.nS_max + 1e-3)
+        assert np.all(np.abs(s.inputs[:, 0]) <= cfg.dnT_max + 1e-3)
+        assert np.all(np.abs(s.inputs[:, 1]) <= cfg.dnS_max + 1e-3)
+        assert np.all(s.slack_m <= 1e-6) and np.all(s.slack_m >= cfg.slack_min_m - 1e-6)
+
+
+def test_waypoints_near_a_wall_keep_the_hull_circles_off_it(rti):
+    """Straight canal 20 m wide, waypoints 3 m from the east wall, walls in 20 m pieces: the
+    circles keep R_b + d_p less the super-ellipse's error near segment ends (0.7 m)."""
+    rti.reset()
+    canal = straight_canal(width_m=20.0, waypoint_offset_m=7.0, piece_m=20.0)
+    run = closed_loop(rti, canal, X0, ACT0, steps=350)
+    assert not run.failure
+    settled = run.clearance_m[150:]
+    worst = float(run.clearance_m.min())
+    print(f"\nworst hull-circle clearance {worst:.3f} m (R_b + d_p = {SAFE} m); "
+          f"settled mean {settled.mean():.3f} m; max slack "
+          f"{max(s.max_slack_m for s in run.steps):.3f} m")
+    assert worst >= SAFE - 0.7
+    # it does give up the waypoints to keep clear: the boat sits well west of them
+    assert run.states[150:, 1].max() < 7.0 - 1.0
+    assert all(s.stats.ok for s in run.steps)
+    check_bounds(run)
+
+
+def test_narrow_stretch_keeps_to_the_middle_and_the_slack_absorbs_it(rti):
+    """9 m wide, below 2 (R_b + d_p) = 10 m: no solver failure, the slack takes the 0.5 m."""
+    rti.reset()
+    canal = straight_canal(width_m=9.0, waypoint_offset_m=0.0)
+    x0 = X0.copy()
+    x0[1] = 1.0  # start 1 m off the centre line
+    run = closed_loop(rti, canal, x0, ACT0, steps=300)
+    assert not run.failure
+    assert all(s.stats.ok for s in run.steps)
+    offset = np.abs(run.states[100:, 1])
+    slack = np.array([s.max_slack_m for s in run.steps[100:]])
+    print(f"\nnarrow 9 m: max offset {offset.max():.3f} m, slack {slack.min():.3f}.."
+          f"{slack.max():.3f} m, clearance {run.clearance_m[100:].min():.3f} m")
+    assert offset.max() < 0.5
+    assert slack.min() > 0.3  # the unavoidable 0.5 m is taken by the slack
+    check_bounds(run)
+
+
+def test_straight_water_holds_the_target_speed(rti):
+    rti.reset()
+    x0 = X0.copy()
+    x0[3] = 1.2
+    run = closed_loop(rti, open_water(), x0, np.array([30.0, 0.0]), steps=400)
+    u = run.states[250:, 3]
+    print(f"\nopen water: speed {u.min():.3f}..{u.max():.3f} m/s (target 2.0)")
+    assert np.all(np.abs(u - 2.0) < 0.1)
+    assert np.abs(run.states[250:, 1]).max() < 0.1  # and on the line
+    check_bounds(run)
+
+
+def test_cold_start_converges_and_matches_ipopt():
+    """A first solve from nothing (SQP to convergence) reaches the same plan as IPOPT."""
+    canal = straight_canal(width_m=16.0, waypoint_offset_m=1.0)
+    segs = canal.segments()
+    sqp = NmpcController(CFG, method="sqp")
+    first = sqp.step(X0, ACT0, segs, canal.waypoints, 2.0)
+    assert first.stats.ok and first.stats.converged
+    ipopt = NmpcController(CFG, method="ipopt")
+    ref = ipopt.step(X0, ACT0, segs, canal.waypoints, 2.0)
+    assert ref.stats.ok
+    assert np.abs(first.states[:, :2] - ref.states[:, :2]).max() < 0.05
+    assert np.abs(first.command - ref.command).max() < 0.05
+    rti = NmpcController(CFG, method="rti")
+    assert rti.step(X0, ACT0, segs, canal.waypoints, 2.0).stats.ok
+
+
+def test_a_second_process_finds_the_compiled_code_in_the_cache(rti):
+    assert rti.compiled_info.compiled, "no compiler here: the fallback is tested elsewhere"
+    library = rti.compiled_info.library
+    before = library.stat().st_mtime_ns
+    libraries = sorted(p.name for p in library.parent.glob("*.so"))
+    code = ("import json; from controller.nmpc_controller import NmpcController; "
+            "c = NmpcController(); i = c.compiled_info; "
+            "print(json.dumps({'hit': i.cache_hit, 'lib': str(i.library), "
+            "'compile_s': i.compile_s, 'hpipm_hit': c._qp.qp.cache_hit}))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    info = json.loads(out.stdout.strip().splitlines()[-1])
+    assert info == {"hit": True, "lib": str(library), "compile_s": 0.0, "hpipm_hit": True}
+    assert library.stat().st_mtime_ns == before
+    assert sorted(p.name for p in library.parent.glob("*.so")) == libraries
+
+
+def test_no_compiler_falls_back_to_interpreted_functions(monkeypatch, tmp_path):
+    from controller import codegen_cache
+
+    monkeypatch.setattr(codegen_cache, "compiler", lambda: None)
+    ocp_fn = NmpcController(CFG, method="ipopt").ocp.linearisation
+    with pytest.warns(RuntimeWarning, match="interpreted"):
+        info = codegen_cache.compile_cached(ocp_fn, directory=tmp_path)
+    assert not info.compiled and info.function is ocp_fn and not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("field, value, words", [
+    ("state", [0, float("nan"), 0, 2, 0, 0], "NaN"),
+    ("state", [0, 0, 0], "6 numbers"),
+    ("waypoints", [], "empty"),
+    ("segments", [[10.0, 5.0, 0.0, 0.0]], "zero or negative length"),
+    ("actuators", [float("inf"), 0], "NaN or infinity"),
+])
+def test_bad_input_is_a_clear_error(rti, field, value, words):
+    args = {"state": X0, "actuators": ACT0, "segments": np.zeros((0, 4)),
+            "waypoints": [[0.0, 0.0], [100.0, 0.0]], "target_speed_mps": 2.0}
+    args[field] = value
+    with pytest.raises(InputError, match=words):
+        rti.step(**args)
+
+
+def test_negative_weight_is_a_clear_error():
+    with pytest.raises(InputError, match="negative"):
+        NmpcController(NmpcConfig(r_diag=(1.0, -1.0)))
+
+
+def test_a_failing_qp_falls_back_then_reports_failure():
+    """hpipm stopped after one iteration: never passed on, shifted plan, then SolverError."""
+    canal = straight_canal(width_m=20.0)
+    segs = canal.segments()
+    good = NmpcController(CFG, max_failures=3)
+    first = good.step(X0, ACT0, segs, canal.waypoints, 2.0)
+    assert first.stats.ok
+    # same controller state, a QP solver that cannot finish
+    good._qp.qp = NmpcController(CFG, qp=QpOptions(iter_max=1))._qp.qp
+    x, act = X0.copy(), first.command
+    x[0] += 0.2
+    second = good.step(x, act, segs, canal.waypoints, 2.0)
+    assert not second.stats.ok and second.stats.fallback == "shifted_plan"
+    assert "max_iter" in second.stats.status
+    assert second.stats.consecutive_failures == 1
+    # the command follows the previous plan shifted by 0.1 s
+    assert np.allclose(second.rates, first.inputs[0] + 0.1 * (first.inputs[1] - first.inputs[0]))
+    assert np.all(np.isfinite(second.command))
+    third = good.step(x, second.command, segs, canal.waypoints, 2.0)
+    assert third.stats.consecutive_failures == 2
+    with pytest.raises(SolverError, match="3 steps in a row"):
+        good.step(x, third.command, segs, canal.waypoints, 2.0)
+
+
+def test_a_failed_warm_start_is_retried_from_the_safe_guess(monkeypatch):
+    canal = straight_canal(width_m=20.0)
+    segs = canal.segments()
+    ctl = NmpcController(CFG)
+    first = ctl.step(X0, ACT0, segs, canal.waypoints, 2.0)
+    calls = []
+    original = type(ctl._qp).solve
+
+    def fail_once(self, *args):
+        r = original(self, *args)
+        calls.append(r.ok)
+        if len(calls) == 1:
+            return QpStepResult(r.dw * np.nan, False, "forced", 0, 0.0, 0.0)
+        return r
+
+    monkeypatch.setattr(type(ctl._qp), "solve", fail_once)
+    second = ctl.step(X0, first.command, segs, canal.waypoints, 2.0)
+    assert second.stats.ok and second.stats.fallback == "safe_guess"
+    assert len(calls) == 2 and ctl.consecutive_failures == 0
+
+
+@pytest.mark.slow
+def test_rti_stays_within_0_2_m_of_converged_sqp_on_the_bend():
+    from controller.nmpc_bench import bend_canal
+
+    canal = bend_canal()
+    runs = {m: closed_loop(NmpcController(CFG, method=m), canal, X0, ACT0, steps=450)
+            for m in ("rti", "sqp")}
+    d = np.hypot(*(runs["rti"].states[:, :2] - runs["sqp"].states[:, :2]).T)
+    print(f"\nRTI vs SQP: max {d.max():.4f} m")
+    assert d.max() < 0.2
