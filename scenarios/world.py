@@ -252,9 +252,14 @@ class CanalWorld:
         return (np.vstack([p[:-1] for p in lines]), np.vstack([p[1:] for p in lines]))
 
     def clearance(self, points, air_draft_m: float = np.inf) -> np.ndarray:
-        """Distance from each (x, y) point to the nearest true surface: shape (N,)."""
+        """Distance from each (x, y) point to the nearest true surface: shape (N,); 0 inside
+        an obstacle (a collision)."""
         a, b = self.surface_edges(air_draft_m)
-        return point_segment_distance(points, a, b).min(axis=1)
+        d = point_segment_distance(points, a, b).min(axis=1)
+        for o in self.obstacles:
+            if o.z_bottom_m < air_draft_m:
+                d[o.contains(points)] = 0.0
+        return d
 
     def segments_near(self, xy, radius_m: float, air_draft_m: float = np.inf) -> np.ndarray:
         """True surfaces within `radius_m` of a point, clipped to that circle: (M, 4) rows

@@ -1,0 +1,167 @@
+"""The canal world: construction, validation, and the ground-truth queries."""
+
+import math
+
+import numpy as np
+import pytest
+
+from controller.errors import InputError
+from scenarios.demo_canal import demo_canal
+from scenarios.world import CanalWorld, Obstacle, Wall, offset_polyline, self_intersection
+
+
+def straight(width=12.0, length=100.0, **kw):
+    centre = np.column_stack([np.linspace(0, length, 51), np.zeros(51)])
+    return CanalWorld.from_centre_line(centre, width, **kw)
+
+
+def test_centre_line_gives_two_walls_at_half_width():
+    world = straight(12.0)
+    left, right = world.wall_polylines()
+    assert np.allclose(left[:, 1], -6.0) and np.allclose(right[:, 1], 6.0)
+    assert world.walls[0].land_side == "left" and world.walls[1].land_side == "right"
+    assert world.length_m == pytest.approx(100.0)
+
+
+def test_width_profile_is_interpolated_along_the_centre_line():
+    world = straight(width=[[0.0, 10.0], [50.0, 10.0], [100.0, 20.0]])
+    left, right = world.wall_polylines()
+    width = right[:, 1] - left[:, 1]
+    assert width[0] == pytest.approx(10.0) and width[25] == pytest.approx(10.0)
+    assert width[-1] == pytest.approx(20.0) and width[38] == pytest.approx(15.2, abs=1e-6)
+
+
+def test_per_bank_heights_and_backdrop_behind_the_land_side():
+    world = straight(12.0, wall_height_m=(1.2, 2.5), setback_m=(4.0, 6.0),
+                     backdrop_height_m=(9.0, 0.0))
+    left, right = world.walls
+    assert (left.height_m, right.height_m) == (1.2, 2.5)
+    assert np.allclose(left.backdrop[:, 1], -10.0)  # 4 m behind the west wall, on land
+    assert right.backdrop is None  # open land: nothing taller than the quay
+
+
+def test_offset_polyline_keeps_legs_parallel_at_a_corner():
+    pts = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]])
+    off = offset_polyline(pts, 1.0)  # to the right of travel: east of the first leg
+    assert np.allclose(off[0], [0.0, 1.0]) and np.allclose(off[2], [9.0, 10.0])
+    assert np.allclose(off[1], [9.0, 1.0])  # mitred corner, both legs stay 1 m away
+
+
+def test_segments_near_are_clipped_to_the_circle():
+    world = straight(10.0)
+    segs = world.segments_near((50.0, 0.0), 10.0)
+    assert len(segs) > 0
+    total = segs[:, 3].sum()
+    assert total == pytest.approx(2 * 2 * math.sqrt(10.0**2 - 5.0**2), rel=1e-9)
+    centres = segs[:, :2]
+    assert np.all(np.hypot(centres[:, 0] - 50.0, centres[:, 1]) <= 10.0)
+
+
+def test_bridge_is_left_out_below_its_deck():
+    deck = Obstacle([[40, -10], [44, -10], [44, 10], [40, 10]], z_top_m=4.0, z_bottom_m=3.0,
+                    kind="bridge", name="deck")
+    world = straight(10.0, obstacles=(deck,))
+    assert len(world.surfaces()) == 3
+    assert len(world.surfaces(air_draft_m=2.5)) == 2
+    assert world.clearance([[42.0, 0.0]])[0] == pytest.approx(0.0, abs=1e-9)
+    assert world.clearance([[42.0, 0.0]], air_draft_m=2.5)[0] == pytest.approx(5.0)
+
+
+def test_clearance_is_distance_to_the_nearest_surface():
+    pier = Obstacle([[30, -5], [32, -5], [32, -2], [30, -2]], name="pier")
+    world = straight(10.0, obstacles=(pier,))
+    d = world.clearance([[50.0, 0.0], [31.0, 0.0], [31.0, -3.0]])
+    assert d == pytest.approx([5.0, 2.0, 0.0])  # inside the pier: a collision
+    assert pier.contains([[31.0, -3.0], [31.0, 0.0]]).tolist() == [True, False]
+
+
+def test_line_of_sight_is_blocked_by_a_pier():
+    pier = Obstacle([[30, -5], [32, -5], [32, -2], [30, -2]], name="pier")
+    world = straight(10.0, obstacles=(pier,))
+    pts, theta, edge = world.surface_samples((31.0, 0.0), 30.0)
+    los = world.line_of_sight([[31.0, 0.0]], pts, edge)[:, 0]
+    behind = (pts[:, 1] < -4.9) & (np.abs(pts[:, 0] - 31.0) < 0.9)  # west wall behind the pier
+    assert behind.any() and not los[behind].any()
+    across = pts[:, 1] > 4.9
+    assert los[across].all()
+    # Samples stand for 0.25 m each and follow the surfaces' directions.
+    on_wall = np.abs(pts[:, 1] - 5.0) < 1e-9
+    assert np.allclose(np.abs(theta[on_wall]), 0.0)
+
+
+def test_pose_at_follows_the_centre_line_and_offsets_to_starboard():
+    world = straight(10.0)
+    x, y, psi = world.pose_at(20.0, offset_m=2.0)
+    assert (x, y, psi) == pytest.approx((20.0, 2.0, 0.0))
+    with pytest.raises(InputError, match="outside 0..100.0 m"):
+        world.pose_at(150.0)
+
+
+def test_self_intersection_is_found():
+    assert self_intersection([[0, 0], [10, 0], [10, 10], [5, -5]]) is not None
+    assert self_intersection([[0, 0], [10, 0], [10, 10], [0, 10]]) is None
+
+
+# -- bad input ----------------------------------------------------------------------------
+def test_self_intersecting_wall_is_an_error_naming_it():
+    with pytest.raises(InputError, match=r"wall 'quay': points: the wall crosses itself \(legs 0 and 2\)"):
+        Wall([[0, 0], [10, 0], [10, 10], [5, -5]], name="quay")
+
+
+@pytest.mark.parametrize("kw,match", [
+    ({"points": [[0, 0]]}, "at least 2 points"),
+    ({"points": [[0, 0], [1, np.nan]]}, "not finite"),
+    ({"points": [[0, 0], [0, 0], [1, 1]]}, "repeated point"),
+    ({"points": [[0, 0, 0], [1, 1, 1]]}, r"\[x, y\] points"),
+    ({"height_m": 0.0}, "height_m: must be > 0"),
+    ({"land_side": "port"}, "land_side must be 'left' or 'right'"),
+    ({"setback_m": -1.0}, "setback_m"),
+])
+def test_bad_wall_fields_are_named(kw, match):
+    args = {"points": [[0, 0], [10, 0]], **kw}
+    with pytest.raises(InputError, match=match):
+        Wall(**args)
+
+
+@pytest.mark.parametrize("kw,match", [
+    ({"z_top_m": 1.0, "z_bottom_m": 2.0}, "z_top_m .* must be above z_bottom_m"),
+    ({"kind": "whale"}, "kind must be one of"),
+    ({"outline": [[0, 0], [1, 0]]}, "at least 3 points"),
+    ({"outline": [[0, 0], [2, 2], [2, 0], [0, 2]]}, "outline crosses itself"),
+])
+def test_bad_obstacle_fields_are_named(kw, match):
+    args = {"outline": [[0, 0], [2, 0], [2, 2], [0, 2]], "name": "p", **kw}
+    with pytest.raises(InputError, match=match):
+        Obstacle(**args)
+
+
+def test_bad_width_profile_is_named():
+    centre = [[0, 0], [100, 0]]
+    with pytest.raises(InputError, match="width_m: the s_m values must increase"):
+        CanalWorld.from_centre_line(centre, [[50, 10], [10, 12]])
+    with pytest.raises(InputError, match="width_m"):
+        CanalWorld.from_centre_line(centre, -3.0)
+
+
+def test_a_world_needs_a_wall():
+    with pytest.raises(InputError, match="at least one wall"):
+        CanalWorld.from_walls([])
+
+
+# -- the demo canal -------------------------------------------------------------------------
+def test_demo_canal_has_bends_width_changes_and_a_pier():
+    world = demo_canal()
+    assert 300.0 <= world.length_m <= 500.0
+    kinds = {o.kind for o in world.obstacles}
+    assert {"pier", "boat", "bridge"} <= kinds
+    # Width changes: distance between the banks along the centre line varies by > 5 m.
+    s = np.linspace(0, world.length_m, 80)
+    widths = [2 * world.clearance([world.pose_at(v)[:2]], air_draft_m=0.0)[0] for v in s]
+    assert max(widths) - min(widths) > 5.0
+    # Bends: the heading turns both ways by more than 45 deg.
+    psi = np.unwrap([world.pose_at(v)[2] for v in s])
+    assert np.max(np.diff(psi)) > 0 and np.min(np.diff(psi)) < 0 and np.ptp(psi) > math.radians(45)
+    # Wall heights in the paper's 1-3 m range; banks without gaps.
+    assert all(1.0 <= w.height_m <= 3.0 for w in world.walls)
+    for a, b in zip(world.walls[:2], world.walls[1:3]):
+        assert np.allclose(a.points[-1], b.points[0])
