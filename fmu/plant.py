@@ -70,22 +70,25 @@ class FmuBoat:
     # -- instantiation ------------------------------------------------------------------
     def _collect(self, status: int, category: bytes | None, message: bytes | None) -> None:
         text = (message or b"").decode("utf-8", "replace")
+        if self.fmi_version == 2:
+            text = text.replace("%%", "%")  # our FMI 2.0 wrapper doubles '%' (printf format)
         self.messages.append(text)
         del self.messages[:-100]  # keep the last hundred
 
     def _instantiate2(self, kwargs, logging_on: bool) -> None:
+        # Our own callbacks without fmpy's logger proxy: that proxy keeps one process-wide
+        # target, which a second FMU (or a freed instance) would redirect or leave dangling.
         from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFunctions,
                                fmi2CallbackFreeMemoryTYPE, fmi2CallbackLoggerTYPE)
-        from fmpy.logging import addLoggerProxy
 
         def logger(env, name, status, category, message):
             self._collect(status, category, message)
 
+        libc = ctypes.CDLL(None)
         callbacks = fmi2CallbackFunctions()
         callbacks.logger = fmi2CallbackLoggerTYPE(logger)
-        callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(ctypes.CDLL(None).calloc)
-        callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(ctypes.CDLL(None).free)
-        addLoggerProxy(ctypes.byref(callbacks))  # formats FMI 2.0's printf-style messages
+        callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(libc.calloc)
+        callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(libc.free)
         self._keep = (logger, callbacks)
         self._slave = FMU2Slave(**kwargs)
         self._slave.instantiate(callbacks=callbacks, loggingOn=logging_on)

@@ -18,11 +18,20 @@ static fmi2Status to_fmi2(BoatStatus s) {
     return s == BOAT_OK ? fmi2OK : s == BOAT_WARNING ? fmi2Warning : fmi2Error;
 }
 
+/* FMI 2.0 loggers treat the message as a printf format. Pass it as the format with every
+   '%' doubled and no arguments: a logger that formats prints it as is, and one that cannot
+   read C varargs (Python through ctypes) needs no proxy, only to undo the doubling. */
 static void deliver(void *wrapper, BoatStatus status, const char *category, const char *msg) {
     Instance *inst = (Instance *)wrapper;
-    /* FMI 2.0 loggers treat the message as a printf format: pass it as an argument */
-    if (inst->logger)
-        inst->logger(inst->environment, inst->name, to_fmi2(status), category, "%s", msg);
+    char escaped[2048];
+    size_t i = 0;
+    if (!inst->logger) return;
+    for (; *msg && i + 2 < sizeof escaped; msg++) {
+        if (*msg == '%') escaped[i++] = '%';
+        escaped[i++] = *msg;
+    }
+    escaped[i] = '\0';
+    inst->logger(inst->environment, inst->name, to_fmi2(status), category, escaped);
 }
 
 #define MODEL(c) (((Instance *)(c))->model)
@@ -53,12 +62,12 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     (void)resourceLocation;
     (void)visible;
     if (fmuType != fmi2CoSimulation) {
-        if (logger) logger(env, name, fmi2Error, "logStatusError", "%s",
+        if (logger) logger(env, name, fmi2Error, "logStatusError",
                            "this FMU supports co-simulation only");
         return NULL;
     }
     if (!guid || strcmp(guid, BOAT_TOKEN) != 0) {
-        if (logger) logger(env, name, fmi2Error, "logStatusError", "%s",
+        if (logger) logger(env, name, fmi2Error, "logStatusError",
                            "the GUID does not match this FMU's modelDescription.xml");
         return NULL;
     }

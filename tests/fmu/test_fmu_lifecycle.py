@@ -201,3 +201,17 @@ def test_calls_out_of_order_are_errors(fmu_path):
         boat.set_values({"Xu": -40.0})  # tunable: allowed between steps
         assert np.isfinite(boat.step(10, 0, 0.1)).all()
         assert ctypes.sizeof(ctypes.c_double) == 8 and VR["time"] == 0
+
+
+def test_fmpys_default_logger_still_works_after_our_instances_are_gone(fmus, capsys):
+    """FmuBoat must not hijack fmpy's process-wide FMI 2.0 logger proxy (a freed callback
+    behind it crashed the next fmpy user)."""
+    for _ in range(3):
+        boat = FmuBoat(fmus[2], logging_on=True)
+        boat.setup()
+        boat.step(10, 0, 0.1)
+        boat.close()
+    result = simulate_fmu(str(fmus[2]), stop_time=1.0, output_interval=0.5, debug_logging=True,
+                          start_values={"nT": 10.0})
+    assert result["time"][-1] == pytest.approx(1.0)
+    assert "doStep" in capsys.readouterr().out  # fmpy's own printer got the messages
