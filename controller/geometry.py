@@ -148,3 +148,28 @@ class Polyline:
     def cross_track(self, point) -> float:
         """Unsigned distance from a point to the polyline."""
         return float(self.project(point)[2])
+
+
+def simplify_polyline(points, tolerance_m: float) -> np.ndarray:
+    """Ramer-Douglas-Peucker: the fewest vertices that keep the polyline within tolerance_m.
+
+    Long straight walls come back as one segment each, bends as short chords: the shape a
+    line detector reports, and what a fixed number of segment slots can hold.
+    """
+    pts = np.asarray(points, float).reshape(-1, 2)
+    if len(pts) <= 2:
+        return pts.copy()
+    keep = np.zeros(len(pts), bool)
+    keep[[0, -1]] = True
+    stack = [(0, len(pts) - 1)]
+    while stack:
+        i, j = stack.pop()
+        if j <= i + 1:
+            continue
+        d = point_segment_distance(pts[i + 1:j], pts[i], pts[j])[:, 0]
+        k = int(np.argmax(d))
+        if d[k] > tolerance_m:
+            k += i + 1
+            keep[k] = True
+            stack += [(i, k), (k, j)]
+    return pts[keep]

@@ -4,21 +4,45 @@ from __future__ import annotations
 
 import numpy as np
 
+from controller.geometry import Segment, simplify_polyline
 from scenarios.world import CanalWorld
 
 
 class KnownWalls:
-    """The paper's simulation assumption: the true walls within `range_m` are known exactly."""
+    """The paper's simulation assumption: the true walls within `range_m` are known exactly.
+
+    The outlines are simplified first (5 cm tolerance), so a straight wall is one segment and
+    a bend a chain of chords, as a line detector reports them, not the many short pieces of a
+    resampled canal that would crowd the controller's fixed segment slots.
+    """
 
     name = "known-walls"
 
-    def __init__(self, world: CanalWorld, range_m: float = 50.0, air_draft_m: float = np.inf):
-        self.world = world
+    def __init__(self, world: CanalWorld, range_m: float = 50.0, air_draft_m: float = np.inf,
+                 tolerance_m: float = 0.05):
         self.range_m = range_m
-        self.air_draft_m = air_draft_m
+        lines = [simplify_polyline(p, tolerance_m) for p in world.surfaces(air_draft_m)]
+        self._a = np.vstack([p[:-1] for p in lines])
+        self._b = np.vstack([p[1:] for p in lines])
 
     def segments(self, time_s, true_state, estimated_state) -> np.ndarray:
-        return self.world.segments_near(np.asarray(true_state)[:2], self.range_m, self.air_draft_m)
+        return clip_segments_to_circle(self._a, self._b, np.asarray(true_state)[:2], self.range_m)
+
+
+def clip_segments_to_circle(a, b, centre, radius_m: float) -> np.ndarray:
+    """The parts of segments a-b inside a circle, as (M, 4) rows (x_c, y_c, theta, length)."""
+    c = np.asarray(centre, float).reshape(2)
+    d = b - a
+    dd = np.einsum("ij,ij->i", d, d)
+    f = a - c
+    bq = np.einsum("ij,ij->i", f, d)
+    disc = bq * bq - dd * (np.einsum("ij,ij->i", f, f) - radius_m**2)
+    root = np.sqrt(np.maximum(disc, 0.0))
+    t0 = np.clip((-bq - root) / dd, 0.0, 1.0)
+    t1 = np.clip((-bq + root) / dd, 0.0, 1.0)
+    keep = (disc > 0) & (t1 > t0)
+    p0, p1 = (a + t0[:, None] * d)[keep], (a + t1[:, None] * d)[keep]
+    return np.array([Segment.from_endpoints(u, v).as_array() for u, v in zip(p0, p1)]).reshape(-1, 4)
 
 
 class LidarPerception:
