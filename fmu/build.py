@@ -52,6 +52,12 @@ def fmi_headers_dir() -> Path:
     return folder
 
 
+def _fmpy_version() -> str:
+    import fmpy
+
+    return getattr(fmpy, "__version__", "unknown")
+
+
 def platform_folder(fmi_version: int) -> str:
     """binaries/<folder> for the building platform: linux64 (FMI 2.0), x86_64-linux (3.0)."""
     import fmpy
@@ -79,7 +85,8 @@ def generate_sources(folder: Path, fmi_version: int, params: BoatParams = IDENTI
     table = variables(params)
     digest = codegen.source_hash(
         generated + copied,
-        extra=f"fmi{fmi_version}|{params.as_vector().tobytes().hex()}|{CFLAGS}|{LDFLAGS}",
+        extra=f"fmi{fmi_version}|{params.as_vector().tobytes().hex()}|{CFLAGS}|{LDFLAGS}"
+              f"|fmpy headers {_fmpy_version()}",
     )
     token = "{" + str(uuid.UUID(digest[:32])) + "}"
     (folder / codegen.CONFIG_H).write_text(codegen.config_header(table, token))
