@@ -18,10 +18,10 @@ import numpy as np
 
 from .errors import InputError, SolverError
 from .geometry import unwrap_near
-from .nmpc import NU, NX, NX_BOAT, NmpcConfig, build_ocp, pack_params
+from .nmpc import NU, NX, NX_BOAT, NmpcConfig, ParamLayout, build_ocp, pack_params
 from .reference import Reference, WaypointPath, reference_trajectory, waypoint_path
 from .rti import QpOptions, QpStep, SqpResult, sqp
-from .segment_slots import fill_segment_slots
+from .segment_slots import SLOT_FIELDS, fill_segment_slots
 
 METHODS = ("rti", "sqp", "ipopt")
 
@@ -94,6 +94,11 @@ class NmpcController:
         self.max_failures, self.sqp_max_iter, self.sqp_tol = max_failures, sqp_max_iter, sqp_tol
         self.search_ahead_m = reference_search_ahead_m
         self.ocp = build_ocp(config)
+        # what does not change from step to step, computed once
+        self._layout = ParamLayout(config.segment_slots)
+        self._params = pack_params(config, np.zeros((config.segment_slots, len(SLOT_FIELDS))))
+        self._lbw, self._ubw = self.ocp.bounds(np.zeros(NX_BOAT))
+        self._x0_at = self.ocp.states_at[0]
         self.compiled_info = None
         if method == "ipopt":
             from .ipopt import IpoptSolver
@@ -120,12 +125,14 @@ class NmpcController:
 
     # -- the step ---------------------------------------------------------------------------
     def step(self, state, actuators, segments, waypoints, target_speed_mps: float,
-             current=(0.0, 0.0)) -> NmpcStep:
+             current=(0.0, 0.0), elapsed_s: float | None = None) -> NmpcStep:
         """One control period.
 
         state: [x, y, psi, u, v, r] (NED m, rad, body m/s, rad/s); actuators: the current
-        [nT, nS] in %; segments: (M, 4) rows (x_c, y_c, theta, length); waypoints: (K, 2);
-        current: water current [north, east] in m/s.
+        [nT, nS] in %; segments: (M, 4) rows (x_c, y_c, theta, length); waypoints: (K, 2)
+        (the same list keeps the progress along it, a new one restarts it); current: water
+        current [north, east] in m/s; elapsed_s: time since the previous call, by which the
+        warm start is shifted (default: the control period; e.g. 1.0 for a 1 Hz planner).
         """
         t0 = time.perf_counter()
         c = self.config
@@ -135,16 +142,23 @@ class NmpcController:
         current = _finite_vector(current, 2, "current [north, east]")
         self._set_path(waypoints)
 
-        guess = self._shifted_plan()
+        elapsed = c.control_period_s if elapsed_s is None else float(elapsed_s)
+        if not (np.isfinite(elapsed) and elapsed >= 0):
+            raise InputError(f"elapsed_s: must be a non-negative number of s, got {elapsed_s!r}")
+        guess = self._shifted_plan(elapsed)
         if guess is not None:
             x[2] = float(unwrap_near(x[2], guess[self.ocp.state_index(0)][2]))
         reference = reference_trajectory(self._path, x[:2], x[2], target_speed_mps, c.horizon,
                                          c.step_s, self._progress_m, self.search_ahead_m)
         slots = fill_segment_slots(segments, x[:2], c.segment_slots, c.segment_range_m)
-        p = pack_params(c, slots, current)
+        p = self._params.copy()
+        p[self._layout.current] = current
+        p[self._layout.segments] = slots.ravel()
         x_init = np.concatenate([x, act])
-        lbw, ubw = self.ocp.bounds(x_init)
-        w_ref = self.ocp.reference_vector(reference.states)
+        lbw, ubw = self._lbw.copy(), self._ubw.copy()
+        lbw[self._x0_at] = ubw[self._x0_at] = np.concatenate([x_init, [0.0]])
+        w_ref = np.zeros(self.ocp.nw)
+        w_ref[self.ocp.states_at[:, :NX_BOAT]] = reference.states
 
         fallback = ""
         if guess is None:
@@ -211,17 +225,21 @@ class NmpcController:
                          first.time_linearisation_s + retry.time_linearisation_s,
                          first.time_qp_s + retry.time_qp_s)
 
-    def _shifted_plan(self) -> np.ndarray | None:
-        """The previous plan moved forward by one control period (linear interpolation)."""
+    def _shifted_plan(self, elapsed_s: float) -> np.ndarray | None:
+        """The previous plan moved forward by `elapsed_s` (linear interpolation between
+        stages, extrapolated past the last one)."""
         if self._plan is None:
             return None
-        c = self.config
-        tau = c.control_period_s / c.step_s
+        N, Ts = self.config.horizon, self.config.step_s
         states, inputs = self.ocp.unpack(self._plan)
-        ahead_states = np.vstack([states[1:], 2 * states[-1] - states[-2]])
-        ahead_inputs = np.vstack([inputs[1:], inputs[-1:]])
-        return self.ocp.pack(states + tau * (ahead_states - states),
-                             inputs + tau * (ahead_inputs - inputs))
+        pos = np.arange(N + 1) + elapsed_s / Ts
+        i = np.minimum(pos.astype(int), N - 1)
+        f = (pos - i)[:, None]
+        shifted_states = states[i] + f * (states[i + 1] - states[i])
+        j = np.minimum(pos[:N].astype(int), N - 2)
+        g = np.clip(pos[:N] - j, 0.0, 1.0)[:, None]
+        shifted_inputs = inputs[j] + g * (inputs[j + 1] - inputs[j])
+        return self.ocp.pack(shifted_states, shifted_inputs)
 
     def _start_at(self, w: np.ndarray, x_init: np.ndarray) -> np.ndarray:
         w = w.copy()
