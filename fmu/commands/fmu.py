@@ -54,12 +54,14 @@ def run_build(args) -> int:
 
 def run_check(args) -> int:
     from controller.errors import InputError
-    from fmu.check import check_fmu
+    from fmu.check import CHECKS, check_fmu
 
     problems = check_fmu(args.fmu)
     for problem in problems:
         print(f"{args.fmu}: {problem}")
     if not problems:
+        for check in CHECKS:
+            print(f"{args.fmu}: ok: {check}")
         print(f"{args.fmu}: no problems found")
     if args.compare:
         from fmu.verify import compare

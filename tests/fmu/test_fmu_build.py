@@ -205,3 +205,12 @@ def test_fmpy_compiles_the_sources_without_our_binary(fmus, tmp_path):
                              start_values={"nT": 42.0, "nS": 30.0})
                 for p in (path, source_only)]
         assert np.allclose(runs[0]["y"], runs[1]["y"], rtol=1e-12, atol=1e-12)
+
+
+def test_lifecycle_check_notices_a_state_that_does_not_restore(fmus, monkeypatch):
+    from fmu import check
+
+    assert check.lifecycle_problems(fmus[3]) == []
+    monkeypatch.setattr(FmuBoat, "set_state", lambda self, state: None)
+    problems = check.lifecycle_problems(fmus[3])
+    assert any("get/set FMU state" in p for p in problems)
