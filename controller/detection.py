@@ -39,8 +39,8 @@ class DetectionConfig:
     range_m: float = 60.0  # keep |x|, |y| <= this; the NMPC's horizon reaches ~50 m
     hull_x_m: tuple[float, float] = (-4.6, 4.6)  # own hull and cabin (7.9 m boat) + margin
     hull_half_width_m: float = 1.9  # 2.6 m breadth + margin
-    wake_length_m: float = 20.0  # behind hull_x_m[0]: spray and foam in the wake
-    wake_half_width_m: float = 3.5
+    wake_length_m: float = 14.0  # behind hull_x_m[0]: spray and foam in the wake ...
+    wake_half_width_m: float = 3.3  # ... kept short: a wall right astern is still a wall
     # Occupancy grid and Hough transform.
     cell_m: float = 0.2
     hough_theta_deg: float = 1.0  # the refit, not the accumulator, sets the final angle
@@ -164,12 +164,6 @@ def _fit_segments(xy: np.ndarray, cfg: DetectionConfig) -> np.ndarray:
         return np.zeros((0, 4))
     xy = cells  # one point per occupied cell (their centroid) from here on
     segs = _refit(_merge(pieces, cfg), xy, cfg)
-    # Join refitted pieces of one wall that Hough had split, until nothing changes.
-    for _ in range(4):
-        merged = _merge([ab for ab, _ in segs], cfg)
-        if len(merged) == len(segs):
-            break
-        segs = _refit(merged, xy, cfg)
     chords = [c for _, pieces in segs for c in pieces]
     if not chords:
         return np.zeros((0, 4))
@@ -260,10 +254,10 @@ def _douglas_peucker(path, path_t, i, j, cfg) -> list[int]:
 def _principal(pts: np.ndarray):
     """Centre and unit direction of the total-least-squares line through points (the major
     axis of their 2x2 covariance, in closed form)."""
-    centre = pts.mean(axis=0)
-    d = pts - centre
-    sxx, syy, sxy = d[:, 0] @ d[:, 0], d[:, 1] @ d[:, 1], d[:, 0] @ d[:, 1]
-    angle = 0.5 * math.atan2(2.0 * sxy, sxx - syy)
+    n = len(pts)
+    centre = pts.sum(axis=0) / n
+    m = pts.T @ pts / n - np.outer(centre, centre)
+    angle = 0.5 * math.atan2(2.0 * m[0, 1], m[0, 0] - m[1, 1])
     return centre, np.array([math.cos(angle), math.sin(angle)])
 
 

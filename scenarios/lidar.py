@@ -29,6 +29,8 @@ from .world import CanalWorld
 # What each returned point hit (see LidarScan.labels).
 WATER, FACE, GROUND, BACKDROP, OBSTACLE, HULL, SPRAY = range(7)
 LABEL_NAMES = ("water", "wall face", "quay top", "backdrop", "obstacle", "own hull", "spray")
+# The renderer's classes in elevation order (4 = sky, no return) to labels.
+CLASS_LABELS = np.array([WATER, FACE, GROUND, BACKDROP, -1, OBSTACLE], np.int8)
 
 
 @dataclass(frozen=True)
@@ -219,6 +221,7 @@ class _Beams:
     tan_el: np.ndarray
     cos_el: np.ndarray
     t_water: np.ndarray
+    inv_drop: np.ndarray  # 1 / -tan(elevation) for beams going down, else 0
     vec: tuple  # x, y, z arrays: body displacement per metre of horizontal distance
     origin: tuple  # x, y, z arrays: the beam's sensor position in the body frame
     min_h: np.ndarray
@@ -238,6 +241,8 @@ class _Beams:
             tan_el=cat([s.tan_el for s in sensors]),
             cos_el=cat([s.cos_el for s in sensors]),
             t_water=cat([s.t_water for s in sensors]),
+            inv_drop=cat([np.where(s.tan_el < 0, -1.0 / np.minimum(s.tan_el, -1e-9), 0.0)
+                          .astype(np.float32) for s in sensors]),
             vec=tuple(cat([s.vec[:, i] for s in sensors]) for i in range(3)),
             origin=tuple(cat([np.full(len(s.bin), s.origin_body[i]) for s in sensors])
                          for i in range(3)),
@@ -260,6 +265,7 @@ class LidarSimulator:
         self.rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
         self.sensors = [_Sensor(m, self.config.hull) for m in self.config.mounts]
         self._beams = _Beams.join(self.sensors)
+        self._bin_height = np.concatenate([np.full(s.bins, s.mount.height_m) for s in self.sensors])
         self._normals = self.rng.standard_normal(1 << 20, dtype=np.float32)
         self.max_range_m = max(m.max_range_m for m in self.config.mounts)
         e = world.edges
@@ -407,48 +413,47 @@ class LidarSimulator:
         return np.where(in_bin, 0.0, t1), np.where(in_bin, t1, t2), owner
 
     def _render(self, t_face, wall_h, t_back, back_h, t_in, t_out, owner, origins, psi, reach):
-        """Every beam of every sensor at once: which surface its elevation meets first."""
+        """Every beam of every sensor at once: which surface its elevation meets first.
+
+        Along one column the surfaces are met in a fixed order of elevation: water below
+        the wall's foot, the wall face up to its top, the quay top behind it (if the sensor
+        is above it), the backdrop, then sky. So per column four thresholds on tan(elevation)
+        classify all its beams with a few comparisons, and distances are computed only for
+        the beams that return.
+        """
         beams = self._beams
         noise = self.config.noise
         rng = self.rng
         f32 = np.float32
-        b = beams.bin
-        h = beams.height
-        tan = beams.tan_el
-        tf = t_face.astype(f32)[b]
-        hw = wall_h.astype(f32)[b]
-        zf = h + tf * tan
-        best = beams.t_water.copy()
-        label = np.zeros(len(b), np.int8)  # WATER
-        face = (zf >= 0) & (zf <= hw)
-        np.copyto(best, tf, where=face)
-        np.copyto(label, FACE, where=face)
-        over = zf > hw
+        h = self._bin_height
         with np.errstate(divide="ignore", invalid="ignore"):
-            t_ground = (h - hw) / -tan
-        tb = t_back.astype(f32)[b]
-        ground = over & (tan < 0) & (t_ground < tb)
-        np.copyto(best, t_ground, where=ground)
-        np.copyto(label, GROUND, where=ground)
-        rest = over & ~ground
-        back = rest & (h + tb * tan <= back_h.astype(f32)[b])
-        np.copyto(best, tb, where=back)
-        np.copyto(label, BACKDROP, where=back)
-        np.copyto(best, np.inf, where=rest & ~back)  # sky
+            t1 = -h / t_face  # wall foot
+            t2 = np.maximum(t1, (wall_h - h) / t_face)  # wall top
+            t3 = np.maximum(t2, np.where(h > wall_h, -(h - wall_h) / t_back, -np.inf))
+            t4 = np.maximum(t3, (back_h - h) / t_back)  # backdrop top
+        b = beams.bin
+        tan = beams.tan_el
+        cls = ((tan >= t1.astype(f32)[b]).view(np.int8) + (tan > t2.astype(f32)[b])
+               + (tan >= t3.astype(f32)[b]) + (tan > t4.astype(f32)[b]))
+        # cls: 0 water, 1 face, 2 quay top, 3 backdrop, 4 sky (LABELS below), 5 obstacle.
+        tables = (t_face.astype(f32), t_back.astype(f32), (h - wall_h).astype(f32))
+        t_obstacle = self._render_obstacles(t_in, t_out, owner, cls, tables)
 
-        self._render_obstacles(t_in, t_out, owner, best, label)
-
-        ok = (best >= beams.min_h) & (best <= beams.max_h)
-        idx = np.flatnonzero(ok)
+        returns = cls != 4
+        idx = np.flatnonzero(returns)
+        lab = cls[idx]
         u = rng.random(len(idx), dtype=f32)
-        lab = label[idx]
-        keep = (u >= noise.dropout) & ((lab != WATER) | (u < noise.dropout + noise.water_speckle))
+        keep = (u >= noise.dropout) & ((lab != 0) | (u < noise.dropout + noise.water_speckle))
         idx, lab = idx[keep], lab[keep]
-        t = best[idx] + self._normal(len(idx)) * (f32(noise.range_sigma_m) * beams.cos_el[idx])
+        t = self._distance(idx, lab, tables, t_obstacle)
+        ok = (t >= beams.min_h[idx]) & (t <= beams.max_h[idx])
+        idx, lab, t = idx[ok], lab[ok], t[ok]
+        t += self._normal(len(idx)) * (f32(noise.range_sigma_m) * beams.cos_el[idx])
         pts = np.empty((len(idx), 3), f32)
         for i in range(3):
             pts[:, i] = beams.origin[i][idx] + t * beams.vec[i][idx]
-        water = lab == WATER
+        label = CLASS_LABELS[lab]
+        water = label == WATER
         if water.any():
             pts[water, 2] -= rng.uniform(-1.0, 1.0, int(water.sum())).astype(f32) * f32(
                 noise.water_ripple_m)
@@ -458,29 +463,29 @@ class LidarSimulator:
         hull = beams.hull_points[keep] + (
             self._normal(int(keep.sum())) * f32(noise.range_sigma_m))[:, None] * beams.hull_unit[keep]
         return (np.concatenate([pts, hull]),
-                np.concatenate([lab, np.full(len(hull), HULL, np.int8)]),
+                np.concatenate([label, np.full(len(hull), HULL, np.int8)]),
                 np.concatenate([beams.sensor[idx], beams.hull_sensor[keep]]))
 
-    def _normal(self, n: int) -> np.ndarray:
-        """n standard normal draws (float32): a window at a random offset into a table
-        drawn once from the seed; drawing fresh Gaussians would cost more than the
-        rendering. Draws within a scan are independent; windows of different scans start
-        at independent offsets."""
-        size = len(self._normals)
-        if n > size:
-            return self.rng.standard_normal(n, dtype=np.float32)
-        start = int(self.rng.integers(0, size))
-        if start + n <= size:
-            return self._normals[start:start + n]
-        return np.concatenate([self._normals[start:], self._normals[:start + n - size]])
+    def _distance(self, idx, cls, tables, t_obstacle):
+        """Horizontal distance to the hit for beams `idx` of classes `cls`."""
+        beams = self._beams
+        t_face, t_back, above_quay = tables
+        b = beams.bin[idx]
+        t = t_face[b]
+        t = np.where(cls == 3, t_back[b], t)
+        t = np.where(cls == 2, above_quay[b] * beams.inv_drop[idx], t)
+        t = np.where(cls == 0, beams.t_water[idx], t)
+        if t_obstacle is not None:
+            t = np.where(cls == 5, t_obstacle[idx], t)
+        return t
 
-    def _render_obstacles(self, t_in, t_out, owner, best, label) -> None:
-        """Where a beam meets an obstacle (face, top or underside) before `best`, take it.
-        Only beams whose column crosses an obstacle are touched."""
+    def _render_obstacles(self, t_in, t_out, owner, cls, tables):
+        """Where a beam meets an obstacle (face, top or underside) before its surface, mark
+        it (class 5) and return the distances; only beams of columns that cross one."""
         beams = self._beams
         idx = np.flatnonzero((owner >= 0)[beams.bin])
         if not len(idx):
-            return
+            return None
         _, _, _, zb_all, zt_all = self._obst
         b = beams.bin[idx]
         tan = beams.tan_el[idx].astype(float)
@@ -494,9 +499,26 @@ class LidarSimulator:
         t = np.where((tin > 0) & (zi >= zlo) & (zi <= zhi), tin, np.inf)
         t = np.minimum(t, np.where((zi > zhi) & (t_top > tin) & (t_top < tout), t_top, np.inf))
         t = np.minimum(t, np.where((zi < zlo) & (t_under > tin) & (t_under < tout), t_under, np.inf))
-        nearer = t < best[idx]
-        best[idx[nearer]] = t[nearer]
-        label[idx[nearer]] = OBSTACLE
+        base = self._distance(idx, cls[idx], tables, None)
+        base = np.where(cls[idx] == 4, np.inf, base)
+        nearer = t < base
+        out = np.full(len(cls), np.inf, np.float32)
+        out[idx[nearer]] = t[nearer]
+        cls[idx[nearer]] = 5
+        return out
+
+    def _normal(self, n: int) -> np.ndarray:
+        """n standard normal draws (float32): a window at a random offset into a table
+        drawn once from the seed; drawing fresh Gaussians would cost more than the
+        rendering. Draws within a scan are independent; windows of different scans start
+        at independent offsets."""
+        size = len(self._normals)
+        if n > size:
+            return self.rng.standard_normal(n, dtype=np.float32)
+        start = int(self.rng.integers(0, size))
+        if start + n <= size:
+            return self._normals[start:start + n]
+        return np.concatenate([self._normals[start:], self._normals[:start + n - size]])
 
     def _spray(self, speed_mps: float):
         """Droplets in a wedge behind the stern; more at speed, none at rest."""

@@ -150,7 +150,7 @@ def test_water_quay_tops_hull_and_wake_are_cropped():
     water = wall_points((-30, 10), (30, 10), rng, heights=(-0.05, 0.05))  # z ~ 0
     quay = wall_points((-30, 14), (30, 14), rng, heights=(1.5, 1.6))  # above the band
     hull = wall_points((-3.9, 1.2), (3.9, 1.2), rng)  # own hull side
-    wake = wall_points((-20, 0.0), (-5, 0.0), rng)  # spray line behind the stern
+    wake = wall_points((-17, 0.0), (-5, 0.0), rng)  # spray line behind the stern
     for cloud in (water, quay, hull, wake):
         assert not crop_mask(cloud).any()
         assert detect_segments(cloud, (0.0, 0.0, 0.0)).shape == (0, 4)
