@@ -17,12 +17,15 @@ class IpoptSolver:
 
     def __init__(self, ocp: Ocp, max_iter: int = 500, tol: float = 1e-8):
         self.ocp = ocp
-        w = ca.MX.sym("w", ocp.nw)
-        p = ca.MX.sym("p", ocp.linearisation.nnz_in(1))
-        w_ref = ca.MX.sym("w_ref", ocp.nw)
+        # SX throughout (the shooting intervals inlined), as a do-mpc user builds it: CasADi's
+        # exact Hessian through MX maps is ~50x slower here
+        constraints = ocp.constraints.expand()
+        w = ca.SX.sym("w", ocp.nw)
+        p = ca.SX.sym("p", ocp.linearisation.nnz_in(1))
+        w_ref = ca.SX.sym("w_ref", ocp.nw)
         e = w - w_ref
         cost = 0.5 * ca.dot(e, ocp.hessian() * e)
-        nlp = {"x": w, "p": ca.vertcat(p, w_ref), "f": cost, "g": ocp.constraints(w, p)}
+        nlp = {"x": w, "p": ca.vertcat(p, w_ref), "f": cost, "g": constraints(w, p)}
         opts = {"print_time": False, "error_on_fail": False,
                 "ipopt": {"print_level": 0, "max_iter": max_iter, "tol": tol,
                           "sb": "yes"}}
