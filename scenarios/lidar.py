@@ -266,13 +266,25 @@ class LidarSimulator:
         self.sensors = [_Sensor(m, self.config.hull) for m in self.config.mounts]
         self._beams = _Beams.join(self.sensors)
         self._bin_height = np.concatenate([np.full(s.bins, s.mount.height_m) for s in self.sensors])
+        self._beam_start = np.concatenate([[0], np.cumsum([len(s.bin) for s in self.sensors])[:-1]])
         self._normals = self.rng.standard_normal(1 << 20, dtype=np.float32)
         self.max_range_m = max(m.max_range_m for m in self.config.mounts)
         e = world.edges
-        self._face = e["face"]
-        self._back = e["backdrop"]
         self._obst = e["obstacle"]
         self._obstacles = world.obstacles
+        fa, fb, fh = e["face"]
+        ba, bb, bh, _ = e["backdrop"]
+        oa, ob, oo, _, _ = e["obstacle"]
+        self._edges = (  # a, b, category (0 face, 1 backdrop, 2 obstacle), height, obstacle
+            np.concatenate([fa, ba, oa]), np.concatenate([fb, bb, ob]),
+            np.concatenate([np.zeros(len(fa), int), np.ones(len(ba), int), np.full(len(oa), 2)]),
+            np.concatenate([fh, bh, np.zeros(len(oa))]),
+            np.concatenate([np.full(len(fa) + len(ba), -1), oo]).astype(int))
+        counts = np.array([s.bins for s in self.sensors])
+        self._bin_count = counts
+        self._bin_offset = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        self._bin_step = 2.0 * np.pi / counts
+        self._bin_sensor = np.repeat(np.arange(len(counts)), counts)
 
     @property
     def mount_positions_body(self) -> np.ndarray:
@@ -323,94 +335,84 @@ class LidarSimulator:
         psi = pose[2]
         reach = self.max_range_m + 10.0
         origins = self.sensor_positions(pose)
-        tables = [self._cast(s, o, psi, reach) for s, o in zip(self.sensors, origins)]
-        bins = [np.concatenate(col) for col in zip(*tables)]
-        points, labels, sensor = self._render(*bins, origins, psi, reach)
+        points, labels, sensor = self._render(*self._cast(origins, psi, reach), origins, psi,
+                                              reach)
         spray = self._spray(speed_mps)
         return LidarScan(np.concatenate([points, spray[0]]),
                          np.concatenate([labels, spray[1]]),
                          np.concatenate([sensor, spray[2]]))
 
     # -- rendering ----------------------------------------------------------------------
-    def _bin_pairs(self, sensor, o, psi, a, b):
-        """(bin, edge, t) for every azimuth bin whose centre ray crosses an edge, t the
-        horizontal distance along that ray. Each edge covers only the bins in its angular
-        span, so the work grows with the bins times the layers crossed, not with all edges."""
-        if not len(a):
-            return np.zeros(0, int), np.zeros(0, int), np.zeros(0)
-        step = sensor.step
-        ang_a = np.arctan2(a[:, 1] - o[1], a[:, 0] - o[0]) - psi
-        ang_b = np.arctan2(b[:, 1] - o[1], b[:, 0] - o[0]) - psi
+    def _cast(self, origins, psi, reach):
+        """The 2-D cast of every azimuth bin of every sensor (bins numbered across sensors).
+
+        Returns per bin: distance to the nearest wall face and its height, to the backdrop
+        behind it and its height, and to the nearest obstacle's entry and exit with that
+        obstacle's index (-1: none). Each edge is paired only with the bins inside its
+        angular span as a sensor sees it, so the work grows with bins times surfaces crossed,
+        not bins times all edges.
+        """
+        a, b, cat, value, owner = self._edges
+        centre = origins.mean(axis=0)
+        near = np.minimum(np.hypot(*(a - centre).T), np.hypot(*(b - centre).T))
+        keep = np.flatnonzero(near < reach + np.hypot(*(b - a).T))
+        n_total = self._bin_offset[-1] + self.sensors[-1].bins
+        none = np.full(n_total, np.inf)
+        if not len(keep):
+            return none, np.zeros(n_total), none, np.zeros(n_total), none, none, np.full(n_total, -1)
+        # One row per (sensor, edge).
+        n_s, n_e = len(origins), len(keep)
+        edge = np.tile(keep, n_s)
+        sensor = np.repeat(np.arange(n_s), n_e)
+        o = origins[sensor]
+        step = self._bin_step[sensor]
+        ea, eb = a[edge], b[edge]
+        ang_a = np.arctan2(ea[:, 1] - o[:, 1], ea[:, 0] - o[:, 0]) - psi
+        ang_b = np.arctan2(eb[:, 1] - o[:, 1], eb[:, 0] - o[:, 0]) - psi
         span = (ang_b - ang_a + np.pi) % (2 * np.pi) - np.pi
         lo = np.where(span < 0, ang_b, ang_a)
-        k0 = np.ceil(lo / step).astype(int)
-        k1 = np.floor((lo + np.abs(span)) / step).astype(int)
+        k0 = np.ceil(lo / step).astype(np.int64)
+        k1 = np.floor((lo + np.abs(span)) / step).astype(np.int64)
         count = np.maximum(k1 - k0 + 1, 0)
-        total = int(count.sum())
-        edge = np.repeat(np.arange(len(a)), count)
-        k = np.repeat(k0 - (np.cumsum(count) - count), count) + np.arange(total)
-        ray = psi + k * step
-        ex, ey = (b - a)[edge, 0], (b - a)[edge, 1]
-        aox, aoy = a[edge, 0] - o[0], a[edge, 1] - o[1]
-        den = _cross(np.cos(ray), np.sin(ray), ex, ey)
+        row = np.repeat(np.arange(len(edge)), count)
+        k = np.repeat(k0 - (np.cumsum(count) - count), count) + np.arange(int(count.sum()))
+        ray = psi + k * step[row]
+        d = eb - ea
+        ex, ey = d[row, 0], d[row, 1]
         with np.errstate(divide="ignore", invalid="ignore"):
-            t = _cross(aox, aoy, ex, ey) / den
+            t = _cross(ea[row, 0] - o[row, 0], ea[row, 1] - o[row, 1], ex, ey) / _cross(
+                np.cos(ray), np.sin(ray), ex, ey)
         ok = np.isfinite(t) & (t > 1e-6)
-        return k[ok] % sensor.bins, edge[ok], t[ok]
+        row, k, t = row[ok], k[ok], t[ok]
+        s = sensor[row]
+        gbin = self._bin_offset[s] + k % self._bin_count[s]
+        e = edge[row]
+        c = cat[e]
 
-    @staticmethod
-    def _nearest(bins, n_bins, t, edge, floor=None):
-        """Per bin, the nearest pair (beyond `floor[bin]` if given): t (inf) and edge (-1)."""
-        if floor is not None:
-            ok = t > floor[bins] + 1e-6
-            bins, t, edge = bins[ok], t[ok], edge[ok]
-        best = np.full(n_bins, np.inf)
-        np.minimum.at(best, bins, t)
-        which = np.full(n_bins, -1)
-        hit = t == best[bins]
-        which[bins[hit]] = edge[hit]
-        return best, which
+        def nearest(mask, floor=None):
+            gb, tt, ee = gbin[mask], t[mask], e[mask]
+            if floor is not None:
+                beyond = tt > floor[gb] + 1e-6
+                gb, tt, ee = gb[beyond], tt[beyond], ee[beyond]
+            best = np.full(n_total, np.inf)
+            np.minimum.at(best, gb, tt)
+            which = np.full(n_total, -1)
+            hit = tt == best[gb]
+            which[gb[hit]] = ee[hit]
+            return best, which
 
-    def _cull(self, a, b, o, reach):
-        d = np.minimum(np.hypot(*(a - o).T), np.hypot(*(b - o).T))
-        return d < reach + np.hypot(*(b - a).T)
-
-    def _cast(self, sensor: _Sensor, o, psi, reach):
-        """Per azimuth bin of one sensor: distance to the nearest wall face and its height,
-        to the backdrop behind it and its height, and to the nearest obstacle's entry and
-        exit with the obstacle's index (-1: none)."""
-        n_bins = sensor.bins
-        fa, fb, fh = self._face
-        keep = self._cull(fa, fb, o, reach)
-        kb, ke, kt = self._bin_pairs(sensor, o, psi, fa[keep], fb[keep])
-        t_face, e_face = self._nearest(kb, n_bins, kt, ke)
-        wall_h = np.where(e_face >= 0, fh[keep][e_face] if keep.any() else 0.0, 0.0)
-        ba, bb, bh, _ = self._back
-        keep = self._cull(ba, bb, o, reach)
-        kb, ke, kt = self._bin_pairs(sensor, o, psi, ba[keep], bb[keep])
-        t_back, e_back = self._nearest(kb, n_bins, kt, ke, floor=t_face)
-        back_h = np.where(e_back >= 0, bh[keep][e_back] if keep.any() else 0.0, 0.0)
-        t_in, t_out, owner = self._cast_obstacles(sensor, o, psi, reach)
-        return t_face, wall_h, t_back, back_h, t_in, t_out, owner
-
-    def _cast_obstacles(self, sensor, o, psi, reach):
-        n_bins = sensor.bins
-        none = (np.full(n_bins, np.inf), np.full(n_bins, np.inf), np.full(n_bins, -1))
-        if not self._obstacles:
-            return none
-        oa, ob, oo, _, _ = self._obst
-        keep = self._cull(oa, ob, o, reach)
-        if not keep.any():
-            return none
-        oa, ob, oo = oa[keep], ob[keep], oo[keep]
-        kb, ke, kt = self._bin_pairs(sensor, o, psi, oa, ob)
-        t1, e1 = self._nearest(kb, n_bins, kt, ke)
-        owner = np.where(e1 >= 0, oo[e1], -1)
-        same = owner[kb] == oo[ke]
-        t2, _ = self._nearest(kb[same], n_bins, kt[same], ke[same], floor=t1)
-        inside = np.array([obst.contains(o)[0] for obst in self._obstacles])
-        in_bin = (owner >= 0) & inside[np.maximum(owner, 0)]
-        return np.where(in_bin, 0.0, t1), np.where(in_bin, t1, t2), owner
+        t_face, e_face = nearest(c == 0)
+        wall_h = np.where(e_face >= 0, value[e_face], 0.0)
+        t_back, e_back = nearest(c == 1, floor=t_face)
+        back_h = np.where(e_back >= 0, value[e_back], 0.0)
+        t_in, e_in = nearest(c == 2)
+        obst = np.where(e_in >= 0, owner[e_in], -1)
+        t_out, _ = nearest((c == 2) & (owner[e] == obst[gbin]), floor=t_in)
+        if self._obstacles:
+            inside = np.array([ob.contains(origins) for ob in self._obstacles])  # (O, S)
+            in_bin = (obst >= 0) & inside[np.maximum(obst, 0), self._bin_sensor]
+            t_in, t_out = np.where(in_bin, 0.0, t_in), np.where(in_bin, t_in, t_out)
+        return t_face, wall_h, t_back, back_h, t_in, t_out, obst
 
     def _render(self, t_face, wall_h, t_back, back_h, t_in, t_out, owner, origins, psi, reach):
         """Every beam of every sensor at once: which surface its elevation meets first.
@@ -451,7 +453,11 @@ class LidarSimulator:
         t += self._normal(len(idx)) * (f32(noise.range_sigma_m) * beams.cos_el[idx])
         pts = np.empty((len(idx), 3), f32)
         for i in range(3):
-            pts[:, i] = beams.origin[i][idx] + t * beams.vec[i][idx]
+            pts[:, i] = t * beams.vec[i][idx]
+        # Beams are ordered by sensor, so each sensor's origin is added to one slice.
+        cuts = np.searchsorted(idx, self._beam_start)
+        for k, (lo, hi) in enumerate(zip(cuts, np.r_[cuts[1:], len(idx)])):
+            pts[lo:hi] += self.sensors[k].origin_body
         label = CLASS_LABELS[lab]
         water = label == WATER
         if water.any():
@@ -487,18 +493,20 @@ class LidarSimulator:
         if not len(idx):
             return None
         _, _, _, zb_all, zt_all = self._obst
+        f32 = np.float32
         b = beams.bin[idx]
-        tan = beams.tan_el[idx].astype(float)
-        h = beams.height[idx].astype(float)
-        tin, tout = t_in[b], t_out[b]
-        zlo, zhi = zb_all[owner[b]], zt_all[owner[b]]
+        tan = beams.tan_el[idx]
+        h = beams.height[idx]
+        tin, tout = t_in.astype(f32)[b], t_out.astype(f32)[b]
+        zlo, zhi = zb_all.astype(f32)[owner[b]], zt_all.astype(f32)[owner[b]]
         zi = h + tin * tan
+        inv = beams.inv_drop[idx]  # 1 / -tan going down, 0 going up
+        t_top = np.where(inv > 0, (h - zhi) * inv, np.inf)
         with np.errstate(divide="ignore", invalid="ignore"):
-            t_top = np.where(tan < 0, (h - zhi) / -tan, np.inf)
             t_under = np.where(tan > 0, (zlo - h) / tan, np.inf)
         t = np.where((tin > 0) & (zi >= zlo) & (zi <= zhi), tin, np.inf)
-        t = np.minimum(t, np.where((zi > zhi) & (t_top > tin) & (t_top < tout), t_top, np.inf))
-        t = np.minimum(t, np.where((zi < zlo) & (t_under > tin) & (t_under < tout), t_under, np.inf))
+        t = np.where((zi > zhi) & (t_top > tin) & (t_top < tout), t_top, t)
+        t = np.where((zi < zlo) & (t_under > tin) & (t_under < tout), t_under, t)
         base = self._distance(idx, cls[idx], tables, None)
         base = np.where(cls[idx] == 4, np.inf, base)
         nearer = t < base
