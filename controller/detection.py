@@ -2,13 +2,14 @@
 
     crop by height (drop water, quay tops, buildings) and by x, y (drop own hull and wake)
     -> 2-D occupancy grid -> OpenCV HoughLinesP -> merge collinear, overlapping pieces
-    -> refit each line to its points (total least squares) and split it at gaps
+    -> refit each line to its points (total least squares), split it at gaps
+    -> split bent walls into chords (Douglas-Peucker), join faces meeting at corners
     -> segments L_i = (x_c, y_c, theta, length) in the inertial frame (eq. line)
 
 The Hough transform finds which points lie on which wall; the refit makes the segment as
 accurate as the points, not as coarse as the grid. Long straight walls come out as a few long
-segments; a bend as a chain of chords no farther than `inlier_m` from the curve. Every
-threshold is in `DetectionConfig`.
+segments; a bend as a chain of chords within `chord_tolerance_m` of the curve (the NMPC
+then takes the segments nearest the boat). Every threshold is in `DetectionConfig`.
 """
 
 from __future__ import annotations
@@ -163,8 +164,7 @@ def _fit_segments(xy: np.ndarray, cfg: DetectionConfig) -> np.ndarray:
     if not len(pieces):
         return np.zeros((0, 4))
     xy = cells  # one point per occupied cell (their centroid) from here on
-    segs = _refit(_merge(pieces, cfg), xy, cfg)
-    chords = [c for _, pieces in segs for c in pieces]
+    chords = _refit(_merge(pieces, cfg), xy, cfg)
     if not chords:
         return np.zeros((0, 4))
     a, b = _join_corners(np.array([c[0] for c in chords]), np.array([c[1] for c in chords]), cfg)
@@ -328,8 +328,8 @@ def _merge(pieces, cfg: DetectionConfig):
 
 def _refit(lines, xy: np.ndarray, cfg: DetectionConfig):
     """Fit each line to the points near it (total least squares), longest line first, each
-    point used once; split where the points leave a gap longer than `max_gap_m`.
-    Returns ((a, b), chords) per fitted piece: its overall line and its chords (_chords)."""
+    point used once; split where the points leave a gap longer than the allowed gap there,
+    and each run into chords (`_chords`). Returns the chords as (a, b) endpoint pairs."""
     free = np.ones(len(xy), bool)
     out = []
     for a, b in sorted(lines, key=lambda ab: -np.hypot(*(ab[1] - ab[0]))):
@@ -366,15 +366,15 @@ def _refit(lines, xy: np.ndarray, cfg: DetectionConfig):
         for run_s, run in zip(np.split(s, breaks), np.split(sel, breaks)):
             if len(run) < cfg.min_points or run_s[-1] - run_s[0] < cfg.min_length_m:
                 continue
-            centre, w = _principal(xy[run])
-            t = (xy[run] - centre) @ w
             chords = _chords(xy[run], cfg)
+            if not chords:
+                continue
             # Claim only the points on the chords: those of a perpendicular face that the
             # band reached at a corner stay free for that face's own line.
             ca = np.array([c[0] for c in chords])
             cb = np.array([c[1] for c in chords])
             on = point_segment_distance(xy[run], ca, cb).min(axis=1) <= cfg.fit_band_m
-            out.append(((centre + t.min() * w, centre + t.max() * w), chords))
+            out.extend(chords)
             free[run[on]] = False
     return out
 

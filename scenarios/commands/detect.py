@@ -107,7 +107,7 @@ def draw(path, world, sim, pose, scan, keep, segments, config, title="") -> None
         ax_side.axhline(h, color="r", lw=0.8, ls="--")
     ax_side.set(xlim=(-view, view), ylim=(-1.0, 12.0), xlabel="x, forward (m)",
                 ylabel="height above water (m)",
-                title="(b) raw cloud, side view (dashed: height band kept)")
+                title="(b) raw cloud, side view (dashed: the height band kept)")
 
     kept = pts[keep]
     ax_crop.scatter(kept[:, 1], kept[:, 0], s=0.3, c="k", rasterized=True)
@@ -118,7 +118,7 @@ def draw(path, world, sim, pose, scan, keep, segments, config, title="") -> None
         ax_crop.plot([ya, yb, yb, ya, ya], [xa, xa, xb, xb, xa], "r--", lw=0.8)
     ax_crop.set(xlim=(-view / 2, view / 2), ylim=(-view / 2, view / 2), aspect="equal",
                 xlabel="y, starboard (m)", ylabel="x, forward (m)",
-                title=f"(c) cropped cloud: {len(kept)} points (dashed: hull and wake dropped)")
+                title=f"(c) cropped: {len(kept)} points\n(dashed: hull and wake dropped)")
 
     x, y, psi = pose
     for k, line in enumerate(world.surfaces()):
@@ -137,7 +137,7 @@ def draw(path, world, sim, pose, scan, keep, segments, config, title="") -> None
     ax_map.plot(y + 50 * np.sin(ring), x + 50 * np.cos(ring), "k:", lw=0.8, label="50 m")
     ax_map.set(xlim=(y - view, y + view), ylim=(x - view, x + view), aspect="equal",
                xlabel="east (m)", ylabel="north (m)",
-               title=f"(d) {len(segments)} detected segments over the true walls")
+               title=f"(d) {len(segments)} segments over the true walls")
     ax_map.legend(loc="lower right", fontsize=8)
     if title:
         fig.suptitle(title)
