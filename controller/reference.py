@@ -54,24 +54,25 @@ class WaypointPath:
 
     def project(self, point, s_min: float = 0.0, s_max: float | None = None) -> tuple[float, float]:
         """(s, distance) of the closest point with arc length in [s_min, s_max]."""
-        cum = self.cumulative
+        cum, L = self.cumulative, self.leg_length
         s_max = cum[-1] if s_max is None else min(s_max, cum[-1])
         s_min = min(s_min, s_max)
         lo, hi = np.maximum(cum[:-1], s_min), np.minimum(cum[1:], s_max)
         legs = np.nonzero(lo <= hi)[0]
-        d = np.asarray(point, float)[:2] - self.start[legs]
-        t = np.einsum("ij,ij->i", d, self.delta[legs]) / self.leg_length[legs] ** 2
-        s = np.clip(cum[legs] + np.clip(t, 0.0, 1.0) * self.leg_length[legs], lo[legs], hi[legs])
-        xy = self.at(s)[0]
-        dist = np.hypot(*(xy - np.asarray(point, float)[:2]).T)
+        p = np.asarray(point, float)[:2]
+        d = p - self.start[legs]
+        along = (d[:, 0] * self.delta[legs, 0] + d[:, 1] * self.delta[legs, 1]) / L[legs]
+        s = np.minimum(np.maximum(cum[legs] + along, lo[legs]), hi[legs])
+        xy = self.start[legs] + ((s - cum[legs]) / L[legs])[:, None] * self.delta[legs]
+        dist = np.hypot(xy[:, 0] - p[0], xy[:, 1] - p[1])
         i = int(np.argmin(dist))
         return float(s[i]), float(dist[i])
 
     def at(self, s) -> tuple[np.ndarray, np.ndarray]:
         """Points (n, 2) and leg headings (n,) at arc lengths s, clamped to the ends."""
-        s = np.clip(np.atleast_1d(np.asarray(s, float)), 0.0, self.cumulative[-1])
-        i = np.clip(np.searchsorted(self.cumulative, s, side="right") - 1, 0,
-                    len(self.leg_length) - 1)
+        s = np.minimum(np.maximum(np.atleast_1d(np.asarray(s, float)), 0.0), self.cumulative[-1])
+        i = np.minimum(np.searchsorted(self.cumulative, s, side="right") - 1,
+                       len(self.leg_length) - 1)
         t = (s - self.cumulative[i]) / self.leg_length[i]
         return self.start[i] + t[:, None] * self.delta[i], self.heading[i]
 

@@ -1,0 +1,146 @@
+"""`canalnav bench nmpc`: closed-loop runs of the NMPC per solver on one canal; JSON out.
+
+The same problem for every solver: a canal with a 90 deg bend and a stretch narrower than
+2 (R_b + d_p), the segments of the true walls within 50 m (the paper's simulation), 16 slots,
+10 Hz, the smooth model as the plant. Times are wall clock per control step (reference,
+segments, solve, command), so they include Python; the machine is shared, so compare the
+ratios of one run rather than absolute times across runs.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+
+
+def register_bench(sub) -> None:
+    p = sub.add_parser(
+        "nmpc", help="NMPC per-step time: RTI vs converged SQP vs IPOPT (closed loop)",
+        description="Closed-loop runs on a canal with a bend and a narrow stretch: mean, p99 "
+        "and max time per control step for real-time iteration (compiled linearisation + "
+        "HPIPM), SQP to convergence and IPOPT (CasADi's interpreted functions), their ratios, "
+        "where RTI's time goes, and how far RTI's track is from the converged ones.")
+    p.add_argument("--steps", type=int, default=600, help="control steps at 10 Hz (600)")
+    p.add_argument("--narrow-m", type=float, default=9.0,
+                   help="width of the narrow stretch in m (9; below 2 (R_b + d_p) = 10)")
+    p.add_argument("--speed", type=float, default=2.0, help="target speed in m/s (2.0)")
+    p.add_argument("--solvers", default="rti,sqp,ipopt",
+                   help="comma list of rti, sqp, ipopt (all three)")
+    p.add_argument("--qp-tol", type=float, default=None,
+                   help="HPIPM's residual tolerance for RTI and SQP (default: QpOptions')")
+    p.add_argument("--qp-compare-steps", type=int, default=200,
+                   help="steps of extra RTI runs with each QP solver (hpipm direct, hpipm "
+                   "through CasADi, piqp); 0 skips them (200)")
+    p.set_defaults(func=run)
+
+
+def _summary(run, label: str) -> dict:
+    import numpy as np
+
+    t = run.step_times_s * 1e3
+    st = [s.stats for s in run.steps]
+    out = {
+        "steps": len(run.steps),
+        "mean_ms": round(float(t.mean()), 3),
+        "p99_ms": round(float(np.percentile(t, 99)), 3),
+        "max_ms": round(float(t.max()), 3),
+        "breakdown_mean_ms": {
+            "linearisation": round(1e3 * float(np.mean([s.time_linearisation_s for s in st])), 3),
+            "qp": round(1e3 * float(np.mean([s.time_qp_s for s in st])), 3),
+            "glue": round(1e3 * float(np.mean([s.time_glue_s for s in st])), 3),
+        },
+        "qp_iterations_mean": round(float(np.mean([s.qp_iterations for s in st])), 2),
+        "sqp_iterations_mean": round(float(np.mean([s.sqp_iterations for s in st])), 2),
+        "converged_steps": int(sum(s.converged for s in st)),
+        "failed_steps": int(sum(not s.ok for s in st)),
+        "fallback_steps": int(sum(bool(s.fallback) for s in st)),
+        "min_clearance_m": round(float(run.clearance_m.min()), 3),
+        "max_slack_m": round(max(s.max_slack_m for s in run.steps), 3),
+        "final_state": [round(float(v), 3) for v in run.states[-1]],
+        "stopped_by_failure": run.failure or None,
+    }
+    if label == "ipopt":
+        out["breakdown_mean_ms"] = {"ipopt": out["breakdown_mean_ms"]["qp"],
+                                    "glue": out["breakdown_mean_ms"]["glue"]}
+    return out
+
+
+def run(args) -> int:
+    import numpy as np
+
+    from controller.errors import InputError
+    from controller.nmpc import NmpcConfig
+    from controller.nmpc_bench import bend_canal, closed_loop
+    from controller.nmpc_controller import METHODS, NmpcController
+    from controller.rti import QpOptions
+
+    solvers = [s.strip() for s in args.solvers.split(",") if s.strip()]
+    unknown = set(solvers) - set(METHODS)
+    if unknown or not solvers:
+        raise InputError(f"--solvers: choose from {', '.join(METHODS)}, got {args.solvers!r}")
+    if args.steps < 10:
+        raise InputError(f"--steps: need at least 10, got {args.steps}")
+    if not 0 < args.narrow_m:
+        raise InputError(f"--narrow-m: must be positive, got {args.narrow_m}")
+    config = NmpcConfig()
+    qp = QpOptions() if args.qp_tol is None else QpOptions(tol=args.qp_tol)
+    canal = bend_canal(narrow_m=args.narrow_m)
+    x0, act0 = np.array([0.0, 0.0, 0.0, args.speed, 0.0, 0.0]), np.array([47.0, 0.0])
+
+    result: dict = {
+        "problem": {
+            "canal": canal.name, "steps": args.steps, "control_hz": 1 / config.control_period_s,
+            "horizon": config.horizon, "step_s": config.step_s,
+            "segment_slots": config.segment_slots, "segment_range_m": config.segment_range_m,
+            "target_speed_mps": args.speed,
+            "plant": "smooth model, RK4 2 x 0.05 s, actuator rate limits 10 and 40 %/s",
+        },
+        "machine": {"cpus": os.cpu_count(), "load_avg_1min": round(os.getloadavg()[0], 2)},
+        "solvers": {},
+    }
+    runs = {}
+    for method in solvers:
+        print(f"bench nmpc: {method} ...", file=sys.stderr, flush=True)
+        controller = NmpcController(config, method=method, qp=qp)
+        if controller.compiled_info is not None and "codegen" not in result:
+            info = controller.compiled_info
+            result["codegen"] = {"compiled": info.compiled, "cache_hit": info.cache_hit,
+                                 "compile_s": round(info.compile_s, 2),
+                                 "library": str(info.library) if info.library else None}
+        runs[method] = closed_loop(controller, canal, x0, act0, args.steps, args.speed)
+        result["solvers"][method] = _summary(runs[method], method)
+        if method != "ipopt":
+            result["solvers"][method]["qp"] = {"solver": qp.solver, "mode": qp.hpipm_mode,
+                                               "tol": qp.tol}
+
+    if "rti" in runs:
+        rti_mean = result["solvers"]["rti"]["mean_ms"]
+        result["ratios_mean_over_rti"] = {
+            m: round(result["solvers"][m]["mean_ms"] / rti_mean, 1) for m in runs if m != "rti"}
+        for other in ("sqp", "ipopt"):
+            if other in runs:
+                n = min(len(runs["rti"].states), len(runs[other].states))
+                d = np.hypot(*(runs["rti"].states[:n, :2] - runs[other].states[:n, :2]).T)
+                result[f"rti_vs_{other}_max_position_diff_m"] = round(float(d.max()), 4)
+        r = result["solvers"]["rti"]
+        result["goal"] = {
+            "rti_mean_ms<=2": r["mean_ms"] <= 2.0, "rti_p99_ms<=5": r["p99_ms"] <= 5.0,
+            "ipopt/rti>=30": result["ratios_mean_over_rti"].get("ipopt", 0) >= 30,
+            "rti_vs_sqp<=0.2m": result.get("rti_vs_sqp_max_position_diff_m", 1e9) <= 0.2,
+        }
+
+    if args.qp_compare_steps > 0:
+        compare = {}
+        for solver in ("hpipm", "hpipm-casadi", "piqp"):
+            print(f"bench nmpc: RTI with {solver} ...", file=sys.stderr, flush=True)
+            controller = NmpcController(config, method="rti",
+                                        qp=QpOptions(solver=solver, tol=qp.tol))
+            run_ = closed_loop(controller, canal, x0, act0, args.qp_compare_steps, args.speed)
+            s = _summary(run_, "rti")
+            compare[solver] = {k: s[k] for k in ("mean_ms", "p99_ms", "max_ms",
+                                                  "breakdown_mean_ms", "qp_iterations_mean",
+                                                  "failed_steps")}
+        result["qp_solvers_rti"] = compare
+    print(json.dumps(result, indent=2))
+    return 0
