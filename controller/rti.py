@@ -14,8 +14,10 @@ numpy, against 3 us).
 
 from __future__ import annotations
 
+import subprocess
 import time
-from dataclasses import dataclass
+import warnings
+from dataclasses import dataclass, replace
 
 import casadi as ca
 import numpy as np
@@ -90,7 +92,15 @@ class QpStep:
         self._lin_buf, self._lin, self.pieces = _bind(linearisation, [self.w, self.p])
 
         if options.solver == "hpipm":
-            self._init_hpipm()
+            try:
+                self._init_hpipm()
+            except (OSError, subprocess.CalledProcessError) as exc:
+                detail = (getattr(exc, "stderr", "") or str(exc)).strip()[:300]
+                warnings.warn(f"cannot build the direct HPIPM interface ({detail}); using "
+                              "CasADi's (about 1 ms slower a step)", RuntimeWarning,
+                              stacklevel=2)
+                self.options = replace(options, solver="hpipm-casadi")
+                self._init_conic()
         else:
             self._init_conic()
 
@@ -111,6 +121,7 @@ class QpStep:
         rows, cols = (np.asarray(v) for v in ocp.h_sparsity.get_triplet())
         self._C_at = cols * nh + rows
         self.qp.ug[:] = o.inf
+        self._solve = self._solve_hpipm
 
     def _solve_hpipm(self, w, w_ref, lbw, ubw) -> tuple[np.ndarray, bool, str, int]:
         N, qp = self.ocp.N, self.qp
@@ -153,6 +164,7 @@ class QpStep:
         # 3.8.2), and converting the arguments costs about 1 ms a call
         self.solver = ca.conic("nmpc_qp", plugin, qp, opts)
         self._h = ca.DM(ca.Sparsity.diag(ocp.nw), self.hessian)
+        self._solve = self._solve_conic
 
     def _solve_conic(self, w, w_ref, lbw, ubw) -> tuple[np.ndarray, bool, str, int]:
         g, jac_nz = self.ocp.assemble(*self.pieces)
@@ -187,8 +199,7 @@ class QpStep:
         self.p[:] = p
         self._lin()
         t1 = time.perf_counter()
-        solve = self._solve_hpipm if self.options.solver == "hpipm" else self._solve_conic
-        dw, ok, status, iterations = solve(w, w_ref, lbw, ubw)
+        dw, ok, status, iterations = self._solve(w, w_ref, lbw, ubw)
         t2 = time.perf_counter()
         ok = ok and bool(np.isfinite(dw).all())
         return QpStepResult(dw + (w - w_caller), ok, status, iterations, t1 - t0, t2 - t1)

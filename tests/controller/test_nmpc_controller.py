@@ -209,3 +209,18 @@ def test_rti_stays_within_0_2_m_of_converged_sqp_on_the_bend():
     d = np.hypot(*(runs["rti"].states[:, :2] - runs["sqp"].states[:, :2]).T)
     print(f"\nRTI vs SQP: max {d.max():.4f} m")
     assert d.max() < 0.2
+
+
+def test_without_the_direct_hpipm_interface_casadis_is_used(monkeypatch):
+    from controller import hpipm_qp
+
+    def no_build(*args, **kwargs):
+        raise OSError("no C compiler found")
+
+    monkeypatch.setattr(hpipm_qp, "load_library", no_build)
+    with pytest.warns(RuntimeWarning, match="CasADi's"):
+        ctl = NmpcController(CFG)
+    assert ctl._qp.options.solver == "hpipm-casadi"
+    canal = straight_canal(width_m=20.0)
+    step = ctl.step(X0, ACT0, canal.segments(), canal.waypoints, 2.0)
+    assert step.stats.ok
