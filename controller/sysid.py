@@ -1,0 +1,770 @@
+"""System identification: the paper's NLP (eq. SI) over manoeuvre logs, IPOPT through CasADi.
+
+    P* = argmin_P  sum_i (x_i - x̄_i)' W (x_i - x̄_i)   s.t.  x_{i+1} = f_d(x_i, ū_i, P)
+
+with f_d the RK4 discretisation of `controller.model.boat_ode` over each log's own sample
+intervals (multiple shooting: every sample's state is a variable, tied by the dynamics).
+Decoupled as in the paper: surge first (acceleration and deceleration runs, W = diag(0,0,0,1,0,0),
+parameters m11 Xu Xuu c), then sway-yaw (zigzags, W = diag(1,1,100,0,100,100), parameters
+m22 m33 Yv Yr Nv Nr Yvv Yrr Nvv Nrr) with the surge part fixed. A sample whose state was not
+measured has zero weight; each run's initial state is estimated with the parameters (the
+components a stage does not weight are held at their first measured value).
+
+Scale: the model is unchanged when every force-like parameter is multiplied by one factor, so
+logs fix the parameters only up to that factor. One surge parameter anchors it: by default m11,
+from the weight plus Söding's surge added-mass estimate; `fixed` can name another.
+Initial guesses come from the boat's dimensions only (`initial_guess`), never from known values.
+Standard errors: Gauss-Newton approximation at the optimum, H ≈ J'WJ with J the sensitivity of
+the simulated states to the parameters and to each run's initial state, and the residual
+variance estimated per channel (sandwich form, since W is not the inverse noise covariance).
+They assume white measurement noise and are conditional on the earlier stage.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import InputError, SolverError, where
+from .logs import STATE_COLUMNS, ManeuverLog
+from .params import PARAM_INFO, PARAM_NAMES, BoatParams
+
+SURGE_PARAMS = ("m11", "Xu", "Xuu", "c")
+SWAY_YAW_PARAMS = ("m22", "m33", "Yv", "Yr", "Nv", "Nr", "Yvv", "Yrr", "Nvv", "Nrr")
+KNOWN_PARAMS = ("thrust_scale", "ly", "delta_max")
+"""Geometry and units, not identified: they keep their values unless fixed otherwise."""
+SURGE_WEIGHTS = (0.0, 0.0, 0.0, 1.0, 0.0, 0.0)
+SWAY_YAW_WEIGHTS = (1.0, 1.0, 100.0, 0.0, 100.0, 100.0)
+MIN_SAMPLES = 20
+MIN_DURATION_S = 2.0
+POSITIVE = ("m11", "m22", "m33", "c")
+DISSIPATIVE = ("Xu", "Xuu", "Yv", "Nr", "Yvv", "Nrr")
+"""Bounds: masses and thrust positive, the diagonal damping derivatives not positive."""
+POOR_RELATIVE_SE = 0.25
+OPTIONAL_TERMS = ("Yvv", "Nrr", "Yr", "Nv", "Yrr", "Nvv")
+"""Sway-yaw terms beyond the linear diagonal core (m22 m33 Yv Nr), added one at a time in
+this order and kept only when the data tell them from zero (forward selection)."""
+SELECT_T = 2.0
+NEGLIGIBLE_RATIO = 1e-3
+"""A true value below this fraction of the parameter's typical size (its guess) counts as
+zero: no ratio error is shown for it."""
+"""Sway-yaw cross terms: the sway-yaw stage first fits without them, then with them."""
+
+
+# -- initial guesses from the dimensions -----------------------------------------------------
+@dataclass(frozen=True)
+class BoatDimensions:
+    """What is known before any test: the paper's boat (1,700 kg, 7.9 m, 2.6 m) by default.
+
+    The draft follows from the displacement with an assumed block coefficient; the speed
+    scales the speed-dependent linear derivatives.
+    """
+
+    mass_kg: float = 1700.0
+    length_m: float = 7.9
+    breadth_m: float = 2.6
+    water_density_kgm3: float = 1000.0  # fresh water (canal)
+    block_coefficient: float = 0.5
+    design_speed_mps: float = 2.0
+    resistance_coefficient: float = 0.0035  # C_T: ITTC-57 friction at Re ~ 1.6e7 plus form
+    crossflow_drag_coefficient: float = 1.0
+
+    @property
+    def displacement_m3(self) -> float:
+        return self.mass_kg / self.water_density_kgm3
+
+    @property
+    def draft_m(self) -> float:
+        return self.displacement_m3 / (self.block_coefficient * self.length_m * self.breadth_m)
+
+
+def surge_added_mass(dims: BoatDimensions) -> float:
+    """Söding (1982) surge added mass, -X_udot = 2.7 rho V^(5/3) / L^2 (Fossen, Handbook §6)."""
+    return 2.7 * dims.water_density_kgm3 * dims.displacement_m3 ** (5 / 3) / dims.length_m**2
+
+
+def default_m11(dims: BoatDimensions) -> float:
+    """The default scale anchor: the weight plus Söding's surge added mass."""
+    return dims.mass_kg + surge_added_mass(dims)
+
+
+def initial_guess(dims: BoatDimensions = BoatDimensions()) -> BoatParams:
+    """Every parameter from the dimensions alone, by textbook rules of thumb.
+
+    m11: weight + Söding. m22, m33 and Yv Yr Nv Nr: Clarke et al. (1983) slender-body
+    regressions (added mass and linear derivatives at the design speed), m33 with the dry
+    inertia of a uniform box m (L^2 + B^2) / 12. Surge: resistance 0.5 rho S C_T U^2 at the
+    design speed, S = L (B + 2T), split 80 % quadratic, 20 % linear. c: full throttle (100 %)
+    reaches the displacement hull speed 1.34 sqrt(L in ft) kn. Yvv, Nrr: cross-flow drag over
+    the hull (C_D = 1); the cross terms Yrr, Nvv: zero (fore-aft symmetry).
+    """
+    rho, L, B, T = dims.water_density_kgm3, dims.length_m, dims.breadth_m, dims.draft_m
+    U, m, cb = dims.design_speed_mps, dims.mass_kg, dims.block_coefficient
+    k = math.pi * (T / L) ** 2
+    Yv_dot = -k * (1 + 0.16 * cb * B / T - 5.1 * (B / L) ** 2) * 0.5 * rho * L**3
+    Nr_dot = -k * (1 / 12 + 0.017 * cb * B / T - 0.33 * B / L) * 0.5 * rho * L**5
+    Yv = -k * (1 + 0.40 * cb * B / T) * 0.5 * rho * L**2 * U
+    Yr = -k * (-0.5 + 2.2 * B / L - 0.080 * B / T) * 0.5 * rho * L**3 * U
+    Nv = -k * (0.5 + 2.4 * T / L) * 0.5 * rho * L**3 * U
+    Nr = -k * (0.25 + 0.039 * B / T - 0.56 * B / L) * 0.5 * rho * L**4 * U
+    wetted = L * (B + 2 * T)
+    resistance = 0.5 * rho * wetted * dims.resistance_coefficient * U**2
+    Xuu = -0.8 * resistance / U**2
+    Xu = -0.2 * resistance / U
+    hull_speed = 1.34 * math.sqrt(L / 0.3048) * 1852 / 3600
+    thrust_scale = BoatParams().thrust_scale
+    c_eff = (-Xu * hull_speed - Xuu * hull_speed**2) / 100.0**2
+    crossflow = 0.5 * rho * T * dims.crossflow_drag_coefficient
+    return BoatParams().replace(
+        m11=default_m11(dims),
+        m22=m - Yv_dot,
+        m33=m * (L**2 + B**2) / 12 - Nr_dot,
+        Xu=Xu, Yv=Yv, Yr=Yr, Nv=Nv, Nr=Nr, Xuu=Xuu,
+        Yvv=-crossflow * L, Yrr=0.0, Nvv=0.0, Nrr=-crossflow * L**4 / 32,
+        c=c_eff / thrust_scale**2,
+    )
+
+
+# -- configuration and results ------------------------------------------------------------------
+@dataclass(frozen=True)
+class SysidConfig:
+    """How to identify: dimensions for the guesses, fixed parameters, weights, solver."""
+
+    dimensions: BoatDimensions = BoatDimensions()
+    fixed: Mapping[str, float] = field(default_factory=dict)
+    surge_weights: tuple[float, ...] = SURGE_WEIGHTS
+    sway_yaw_weights: tuple[float, ...] = SWAY_YAW_WEIGHTS
+    n_sub: int = 2  # RK4 sub-steps per log sample in f_d
+    smooth_eps: float = 1e-6  # |z| ~ sqrt(z^2 + eps) in the NLP (at most 1e-3 off)
+    max_iter: int = 300
+    tol: float = 1e-8
+    select: bool = True  # forward selection of OPTIONAL_TERMS; False fits all at once
+
+    def __post_init__(self) -> None:
+        for name, value in self.fixed.items():
+            if name not in PARAM_NAMES:
+                raise InputError(f"--fix {name}: unknown parameter (known: {', '.join(PARAM_NAMES)})")
+            if not math.isfinite(value):
+                raise InputError(f"--fix {name}: value {value!r} is not finite")
+
+    @property
+    def anchor(self) -> str:
+        """The surge parameter that sets the common scale: the first one fixed, else m11."""
+        return next((n for n in SURGE_PARAMS if n in self.fixed), "m11")
+
+
+@dataclass(frozen=True)
+class ParameterReport:
+    """One row of the table. `std_error` is NaN when fixed or not identified."""
+
+    name: str
+    guess: float
+    estimate: float
+    std_error: float
+    role: str  # "estimated", "fixed", "known", "not identified"
+    note: str = ""
+    true: float | None = None
+    ratio_error: float | None = None  # (est/anchor) / (true/anchor_true) - 1
+
+
+@dataclass(frozen=True)
+class StageReport:
+    """One stage of the decoupled identification."""
+
+    name: str
+    logs: tuple[str, ...]
+    free: tuple[str, ...]
+    n_samples: int
+    iterations: int
+    status: str
+    cost: float
+    rms: Mapping[str, float]  # per weighted channel, display units
+    build_s: float
+    solve_s: float
+    covariance_s: float
+
+
+@dataclass(frozen=True)
+class FitReport:
+    """A simulation of a parameter set against a log: RMS errors over the measured samples."""
+
+    source: str
+    heading_rms_deg: float
+    speed_rms_mps: float
+    yaw_rate_rms_degps: float
+    n_samples: int
+    duration_s: float
+
+
+@dataclass(frozen=True)
+class SysidResult:
+    params: BoatParams
+    guess: BoatParams
+    anchor: str
+    anchor_note: str
+    parameters: tuple[ParameterReport, ...]
+    stages: tuple[StageReport, ...]
+    heldout: tuple[FitReport, ...]
+    heldout_truth: tuple[FitReport, ...]
+    truth: BoatParams | None
+    notes: tuple[str, ...]
+    heldout_s: float = 0.0
+
+
+# -- the discretised model and the data ------------------------------------------------------------
+def discrete_step(variant, n_sub: int):
+    """f_d(x, u, p, h): RK4 of `boat_ode` over a step of length h (no current)."""
+    import casadi as ca
+
+    from . import model
+
+    x = ca.SX.sym("x", model.NX)
+    u = ca.SX.sym("u", model.NU)
+    p = ca.SX.sym("p", model.NP)
+    h = ca.SX.sym("h")
+    x_next = model.rk4(lambda z: model.boat_ode(z, u, p, (0.0, 0.0), variant), x, h, n_sub)
+    return ca.Function("f_d", [x, u, p, h], [x_next], ["x", "u", "p", "h"], ["x_next"])
+
+
+@dataclass(frozen=True, eq=False)
+class _Data:
+    """A log ready for fitting: psi unwrapped, a first guess of every state at every sample."""
+
+    log: ManeuverLog
+    measured: np.ndarray  # (N, 6) bool
+    values: np.ndarray  # (N, 6) measured values, NaN where not measured; psi unwrapped
+    filled: np.ndarray  # (N, 6) interpolated where missing, 0 where never measured
+
+    @classmethod
+    def of(cls, log: ManeuverLog) -> "_Data":
+        values = log.states.copy()
+        measured = np.isfinite(values)
+        psi = measured[:, 2]
+        values[psi, 2] = np.unwrap(values[psi, 2])
+        filled = np.zeros_like(values)
+        for c in range(values.shape[1]):
+            if measured[:, c].any():
+                filled[:, c] = np.interp(log.time_s, log.time_s[measured[:, c]],
+                                         values[measured[:, c], c])
+        return cls(log, measured, values, filled)
+
+    def first(self, c: int) -> float:
+        """The first measured value of channel c (0 if never measured)."""
+        idx = np.flatnonzero(self.measured[:, c])
+        return float(self.values[idx[0], c]) if idx.size else 0.0
+
+
+def _check_length(data: _Data, weights: Sequence[float], stage: str) -> None:
+    """Refuse a log that cannot inform the stage: too few weighted samples or too short."""
+    log = data.log
+    used = [c for c in range(6) if weights[c] > 0 and data.measured[:, c].any()]
+    if not used:
+        names = [STATE_COLUMNS[c] for c in range(6) if weights[c] > 0]
+        raise InputError(f"{log.source}: column(s) {', '.join(repr(n) for n in names)}: no "
+                         f"values; the {stage} stage fits these")
+    best = max(used, key=lambda c: data.measured[:, c].sum())
+    rows = np.flatnonzero(data.measured[:, best])
+    duration = log.time_s[rows[-1]] - log.time_s[rows[0]]
+    if rows.size < MIN_SAMPLES or duration < MIN_DURATION_S:
+        first, last = log.line_of(int(rows[0])), log.line_of(int(rows[-1]))
+        span = f" (lines {first}-{last})" if first is not None else ""
+        raise InputError(
+            f"{where(log.source, first, STATE_COLUMNS[best])}too short to identify anything: "
+            f"{rows.size} measured sample(s) over {duration:.1f} s{span}; the {stage} stage "
+            f"needs at least {MIN_SAMPLES} samples over {MIN_DURATION_S:g} s"
+        )
+
+
+# -- one stage ------------------------------------------------------------------------------------
+def _scales(guess: BoatParams) -> dict[str, float]:
+    """Typical magnitude of each parameter, so the NLP's variables are of order one."""
+    floor = {"Yrr": 100.0, "Nvv": 100.0}
+    return {n: max(abs(getattr(guess, n)), floor.get(n, 1e-12)) for n in PARAM_NAMES}
+
+
+def _theta_bounds(name: str) -> tuple[float, float]:
+    if name in POSITIVE:
+        return 0.05, np.inf
+    if name in DISSIPATIVE:
+        return -np.inf, 0.0
+    return -np.inf, np.inf
+
+
+@dataclass(frozen=True)
+class _StageSolution:
+    params: BoatParams
+    cov_theta: np.ndarray  # covariance of the free parameters (SI)
+    info_theta: np.ndarray  # J'WJ in the scaled variables (for determinability)
+    report: StageReport
+    x0: list[np.ndarray]
+    trajectories: list[np.ndarray]
+
+
+def _stage_step(step, active: Sequence[int]):
+    """f_d restricted to the `active` states, the others held at zero.
+
+    The surge stage uses active = (u,) with nS = 0: straight running, v = r = 0, where the
+    model reduces to its surge equation (the paper's decoupling); x, y, psi do not enter the
+    dynamics without a current. The sway-yaw stage uses all six states.
+    """
+    import casadi as ca
+
+    if tuple(active) == tuple(range(6)):
+        return step
+    xa = ca.SX.sym("xa", len(active))
+    u = ca.SX.sym("u", 2)
+    p = ca.SX.sym("p", step.size1_in(2))
+    h = ca.SX.sym("h")
+    full = [0.0] * 6
+    for k, c in enumerate(active):
+        full[c] = xa[k]
+    x_next = step(ca.vertcat(*full), u, p, h)
+    return ca.Function("f_d_reduced", [xa, u, p, h], [x_next[list(active)]])
+
+
+def _pinned(data: _Data, active: Sequence[int], wa: np.ndarray) -> list[int]:
+    """Indices (into `active`) of initial states held at their first measurement.
+
+    Every initial state is estimated with the parameters except a position the stage does
+    not fit (weight 0 or never measured): without a current it influences nothing else.
+    """
+    return [k for k, c in enumerate(active)
+            if c in (0, 1) and (wa[k] == 0 or not data.measured[:, c].any())]
+
+
+def _stage_commands(log: ManeuverLog, straight: bool) -> np.ndarray:
+    """(2, N-1) commands over each interval; nS = 0 for straight (surge) runs."""
+    commands = log.commands[:-1].T.copy()
+    if straight:
+        commands[1] = 0.0
+    return commands
+
+
+def _solve_stage(name: str, datas: Sequence[_Data], free: Sequence[str], start: BoatParams,
+                 scales: Mapping[str, float], weights: Sequence[float],
+                 config: SysidConfig, step, trajectories=None,
+                 straight: bool = False) -> _StageSolution:
+    """One NLP (eq. SI) over the stage's runs by multiple shooting; then its covariance."""
+    import casadi as ca
+
+    t0 = time.perf_counter()
+    active = [3] if straight else list(range(6))
+    na = len(active)
+    f_d = _stage_step(step, active)
+    wa = np.asarray(weights, float)[active]
+    n_free = len(free)
+    theta = ca.MX.sym("theta", n_free)
+    p = ca.vertcat(*[scales[n] * theta[free.index(n)] if n in free else getattr(start, n)
+                     for n in PARAM_NAMES])
+    w, g, cost = [theta], [], 0
+    w0 = [np.array([getattr(start, n) / scales[n] for n in free])]
+    lbw = [np.array([_theta_bounds(n)[0] for n in free])]
+    ubw = [np.array([_theta_bounds(n)[1] for n in free])]
+    for i, data in enumerate(datas):
+        n = data.log.n_samples
+        X = ca.MX.sym(f"X_{i}", na, n)
+        X_next = f_d.map(n - 1)(X[:, :-1], _stage_commands(data.log, straight),
+                                ca.repmat(p, 1, n - 1), np.diff(data.log.time_s))
+        g.append(ca.vec(X_next - X[:, 1:]))
+        measured = data.measured[:, active]
+        root_w = (np.sqrt(wa)[None, :] * measured).T  # (na, N): zero where not measured
+        target = np.where(measured, data.values[:, active], 0.0).T
+        cost = cost + ca.sumsqr(root_w * (X - target))
+        w.append(ca.vec(X))
+        lo, hi = np.full((na, n), -np.inf), np.full((na, n), np.inf)
+        guess_traj = (data.filled[:, active].T if trajectories is None
+                      else trajectories[i]).copy()
+        for k in _pinned(data, active, wa):
+            lo[k, 0] = hi[k, 0] = guess_traj[k, 0] = data.first(active[k])
+        lbw.append(lo.ravel(order="F"))
+        ubw.append(hi.ravel(order="F"))
+        w0.append(guess_traj.ravel(order="F"))
+    nlp = {"x": ca.vertcat(*w), "f": cost, "g": ca.vertcat(*g)}
+    opts = {
+        "ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False,
+        "ipopt.max_iter": config.max_iter, "ipopt.tol": config.tol,
+    }
+    solver = ca.nlpsol("sysid_" + name.replace("-", "_"), "ipopt", nlp, opts)
+    t1 = time.perf_counter()
+    sol = solver(x0=np.concatenate(w0), lbx=np.concatenate(lbw), ubx=np.concatenate(ubw),
+                 lbg=0, ubg=0)
+    t2 = time.perf_counter()
+    stats = solver.stats()
+    status = str(stats.get("return_status", "?"))
+    if not stats.get("success", False) and status != "Solved_To_Acceptable_Level":
+        raise SolverError(f"sysid {name} stage: IPOPT did not converge ({status}, "
+                          f"{stats.get('iter_count')} iterations)")
+    wopt = np.asarray(sol["x"]).ravel()
+    est = start.replace(**{n: float(scales[n] * wopt[k]) for k, n in enumerate(free)})
+    x0s, trajs, offset = [], [], n_free
+    for data in datas:
+        n = data.log.n_samples
+        trajs.append(wopt[offset:offset + na * n].reshape((na, n), order="F"))
+        x0s.append(trajs[-1][:, 0].copy())
+        offset += na * n
+    cov, info, rms = _covariance(datas, free, est, scales, wa, x0s, f_d, active, straight)
+    t3 = time.perf_counter()
+    report = StageReport(
+        name=name, logs=tuple(d.log.source for d in datas), free=tuple(free),
+        n_samples=int(sum(d.log.n_samples for d in datas)),
+        iterations=int(stats.get("iter_count", -1)), status=status,
+        cost=float(sol["f"]), rms=rms, build_s=t1 - t0, solve_s=t2 - t1, covariance_s=t3 - t2,
+    )
+    return _StageSolution(est, cov, info, report, x0s, trajs)
+
+
+def _merge_passes(passes: Sequence[StageReport], last: StageReport) -> StageReport:
+    """One report for a stage solved in several passes (`last` the one kept): times and
+    iterations add up."""
+    return StageReport(
+        name=last.name, logs=last.logs, free=last.free, n_samples=last.n_samples,
+        iterations=sum(p.iterations for p in passes), status=last.status, cost=last.cost,
+        rms=last.rms, build_s=sum(p.build_s for p in passes),
+        solve_s=sum(p.solve_s for p in passes),
+        covariance_s=sum(p.covariance_s for p in passes),
+    )
+
+
+def _covariance(datas, free, est: BoatParams, scales, wa, x0s, f_d, active, straight):
+    """Gauss-Newton covariance of the free parameters, each run's fitted x0 a nuisance.
+
+    J = d(simulated measured states)/d(theta, x0) at the optimum; A = J'WJ;
+    cov = A^-1 J'W S W J A^-1 with S the residual variance of each channel.
+    """
+    import casadi as ca
+
+    n_free = len(free)
+    theta = ca.MX.sym("theta", n_free)
+    p = ca.vertcat(*[scales[n] * theta[free.index(n)] if n in free else getattr(est, n)
+                     for n in PARAM_NAMES])
+    theta_hat = np.array([getattr(est, n) / scales[n] for n in free])
+    blocks, resid_rows, chan_rows, weight_rows, n_nuisance = [], [], [], [], []
+    for data, x0 in zip(datas, x0s):
+        n = data.log.n_samples
+        rows = [(k, np.flatnonzero(data.measured[:, c])) for k, c in enumerate(active)
+                if wa[k] > 0]
+        rows = [(k, r) for k, r in rows if r.size]
+        pinned = _pinned(data, active, wa)
+        free_x0 = [k for k in range(len(active)) if k not in pinned]
+        z = ca.MX.sym("z", len(free_x0))
+        x0_sym = ca.vertcat(*[z[free_x0.index(k)] if k in free_x0 else x0[k]
+                              for k in range(len(active))])
+        traj = f_d.mapaccum(n - 1)(x0_sym, _stage_commands(data.log, straight),
+                                   ca.repmat(p, 1, n - 1), np.diff(data.log.time_s))
+        X = ca.horzcat(x0_sym, traj)
+        pred = ca.vertcat(*[X[k, r.tolist()].T for k, r in rows])
+        f = ca.Function("sens", [theta, z], [pred, ca.jacobian(pred, ca.vertcat(theta, z))])
+        pred_v, jac = f(theta_hat, x0[free_x0])
+        resid_rows.append(np.asarray(pred_v).ravel()
+                          - np.concatenate([data.values[r, active[k]] for k, r in rows]))
+        chan_rows.append(np.concatenate([np.full(r.size, active[k]) for k, r in rows]))
+        weight_rows.append(np.concatenate([np.full(r.size, wa[k]) for k, r in rows]))
+        blocks.append(np.asarray(jac))
+        n_nuisance.append(len(free_x0))
+    # J: shared parameter columns, then a block of initial-state columns per run
+    n_cols = n_free + sum(n_nuisance)
+    J = np.zeros((sum(b.shape[0] for b in blocks), n_cols))
+    row, col = 0, n_free
+    for b, k in zip(blocks, n_nuisance):
+        J[row:row + b.shape[0], :n_free] = b[:, :n_free]
+        J[row:row + b.shape[0], col:col + k] = b[:, n_free:]
+        row, col = row + b.shape[0], col + k
+    resid, chan = np.concatenate(resid_rows), np.concatenate(chan_rows)
+    wrow = np.concatenate(weight_rows)
+    dof_factor = resid.size / max(resid.size - n_cols, 1)
+    sigma2 = np.zeros(resid.size)
+    rms = {}
+    for c in np.unique(chan):
+        sel = chan == c
+        var = float(np.mean(resid[sel] ** 2))
+        sigma2[sel] = var * dof_factor
+        unit = {0: "m", 1: "m", 2: "deg", 3: "m/s", 4: "m/s", 5: "deg/s"}[int(c)]
+        rms[f"{STATE_COLUMNS[c]} [{unit}]"] = (math.degrees(math.sqrt(var)) if c in (2, 5)
+                                               else math.sqrt(var))
+    A = J.T @ (wrow[:, None] * J)
+    B = J.T @ ((wrow**2 * sigma2)[:, None] * J)
+    A_inv = np.linalg.pinv(A, rcond=1e-12)
+    S = np.array([scales[n] for n in free])
+    cov = (A_inv @ B @ A_inv)[:n_free, :n_free] * np.outer(S, S)
+    # information about the parameters with the initial states profiled out (Schur complement)
+    Att, Atz, Azz = A[:n_free, :n_free], A[:n_free, n_free:], A[n_free:, n_free:]
+    info = Att - Atz @ np.linalg.pinv(Azz) @ Atz.T if Azz.size else Att
+    return cov, info, rms
+
+
+def _determinability(free: Sequence[str], est: BoatParams, cov: np.ndarray,
+                     info: np.ndarray) -> dict[str, str]:
+    """Notes on parameters the data cannot determine (or only poorly)."""
+    notes: dict[str, str] = {}
+    # near-null directions of the (correlation-normalised) information matrix
+    d = np.sqrt(np.clip(np.diag(info), 1e-300, None))
+    corr = info / np.outer(d, d)
+    vals, vecs = np.linalg.eigh(corr)
+    for val, vec in zip(vals, vecs.T):
+        if val < 1e-8:
+            members = [free[k] for k in np.flatnonzero(np.abs(vec) > 0.3)]
+            for m in members:
+                notes[m] = "not determined: the logs do not separate " + "/".join(members)
+    for k, n in enumerate(free):
+        if n in notes:
+            continue
+        value, se = getattr(est, n), math.sqrt(max(cov[k, k], 0.0))
+        if np.diag(info)[k] <= 0:
+            notes[n] = "not determined: no sensitivity in these logs"
+        elif se >= abs(value):
+            notes[n] = "not determined: cannot be told from zero (SE >= |estimate|)"
+        elif se > POOR_RELATIVE_SE * abs(value):
+            notes[n] = f"poorly determined (SE {100 * se / abs(value):.0f} % of the estimate)"
+    return notes
+
+
+# -- held-out check -----------------------------------------------------------------------------
+def simulate_log(params: BoatParams, log: ManeuverLog, n_sub: int = 4) -> np.ndarray:
+    """The exact model driven by the log's commands from its first measured state: (N, 6)."""
+    from .model import EXACT
+
+    data = _Data.of(log)
+    step = discrete_step(EXACT, n_sub)
+    x0 = np.array([data.first(c) for c in range(6)])
+    n = log.n_samples
+    traj = step.mapaccum(n - 1)(x0, log.commands[:-1].T, np.tile(params.as_vector()[:, None],
+                                                                  (1, n - 1)),
+                                np.diff(log.time_s))
+    return np.column_stack([x0, np.asarray(traj)]).T
+
+
+def fit_report(params: BoatParams, log: ManeuverLog) -> FitReport:
+    """RMS of heading, surge speed and yaw rate between the log and a simulation of `params`."""
+    data = _Data.of(log)
+    sim = simulate_log(params, log)
+
+    def rms(c):
+        m = data.measured[:, c]
+        return float(np.sqrt(np.mean((sim[m, c] - data.values[m, c]) ** 2))) if m.any() else math.nan
+
+    return FitReport(
+        source=log.source, heading_rms_deg=math.degrees(rms(2)), speed_rms_mps=rms(3),
+        yaw_rate_rms_degps=math.degrees(rms(5)), n_samples=log.n_samples,
+        duration_s=float(log.time_s[-1] - log.time_s[0]),
+    )
+
+
+# -- the whole identification ---------------------------------------------------------------------
+def split_logs(logs: Sequence[ManeuverLog]):
+    """(surge runs, sway-yaw runs, held-out runs) by header tags, else by content."""
+    surge, sway_yaw, heldout = [], [], []
+    for log in logs:
+        if log.heldout:
+            heldout.append(log)
+        elif log.maneuver == "surge":
+            surge.append(log)
+        else:
+            sway_yaw.append(log)
+    return surge, sway_yaw, heldout
+
+
+def _common_truth(logs: Sequence[ManeuverLog]) -> BoatParams | None:
+    truths = [log.truth() for log in logs]
+    if not truths or any(t is None for t in truths):
+        return None
+    first = truths[0].as_vector()
+    return truths[0] if all(np.allclose(t.as_vector(), first) for t in truths) else None
+
+
+def identify(logs: Sequence[ManeuverLog], config: SysidConfig = SysidConfig()) -> SysidResult:
+    """Surge then sway-yaw identification from the fit logs; held-out logs only checked."""
+    from .model import Variant
+
+    surge_logs, sway_logs, heldout_logs = split_logs(logs)
+    notes: list[str] = []
+    dims = config.dimensions
+    guess = initial_guess(dims)
+    anchor = config.anchor
+    if anchor in config.fixed:
+        anchor_note = f"{anchor} = {config.fixed[anchor]:g} fixed by the user (sets the scale)"
+    else:
+        anchor_note = (f"m11 fixed at {default_m11(dims):.1f} kg = weight {dims.mass_kg:g} kg + "
+                       f"Söding surge added mass {surge_added_mass(dims):.1f} kg "
+                       "(2.7 rho V^(5/3)/L^2); override with --fix")
+    fixed = dict(config.fixed)
+    if anchor not in fixed:
+        fixed["m11"] = default_m11(dims)
+    start = guess.replace(**fixed)
+    scales = _scales(start)
+    step = discrete_step(Variant(smooth=True, eps=config.smooth_eps), config.n_sub)
+
+    surge_free = [n for n in SURGE_PARAMS if n not in fixed]
+    sway_free = [n for n in SWAY_YAW_PARAMS if n not in fixed]
+    if not surge_logs and surge_free:
+        raise InputError(
+            "no surge run among the logs (acceleration/deceleration with nS = 0, or a "
+            "'# maneuver: acceleration' header): the surge parameters "
+            + ", ".join(surge_free) + " and the scale cannot be identified"
+        )
+    stages, roles, se, det, dropped = [], {}, {}, {}, {}
+    params = start
+    for stage, stage_logs, free, weights in (
+        ("surge", surge_logs, surge_free, config.surge_weights),
+        ("sway-yaw", sway_logs, sway_free, config.sway_yaw_weights),
+    ):
+        if not free:
+            continue
+        if not stage_logs:
+            notes.append(f"no {stage} run among the logs: {', '.join(free)} keep their initial "
+                         "guesses (not identified)")
+            for n in free:
+                roles[n] = "not identified"
+            continue
+        datas = [_Data.of(log) for log in stage_logs]
+        for data in datas:
+            _check_length(data, weights, stage)
+        straight = stage == "surge"
+        extras = [n for n in free if n in OPTIONAL_TERMS] if config.select else []
+        core = [n for n in free if n not in extras]
+        # the core model first, the optional terms held at zero
+        sol = _solve_stage(stage, datas, core, params.replace(**{n: 0.0 for n in extras}),
+                           scales, weights, config, step, straight=straight)
+        passes = [sol.report]
+        free = list(core)
+        for n in extras:
+            # forward selection: keep a term only if the data tell it from zero (> 2 SE)
+            trial = _solve_stage(stage, datas, free + [n], sol.params.replace(**{n: getattr(start, n)}),
+                                 scales, weights, config, step, sol.trajectories,
+                                 straight=straight)
+            passes.append(trial.report)
+            value = getattr(trial.params, n)
+            sd = math.sqrt(max(trial.cov_theta[-1, -1], 0.0))
+            if abs(value) > SELECT_T * sd:
+                sol, free = trial, free + [n]
+            else:
+                dropped[n] = (value, sd)
+        params = sol.params
+        stages.append(_merge_passes(passes, sol.report))
+        for k, n in enumerate(free):
+            roles[n] = "estimated"
+            se[n] = math.sqrt(max(sol.cov_theta[k, k], 0.0))
+        det.update(_determinability(free, params, sol.cov_theta, sol.info_theta))
+        for n, (value, sd) in dropped.items():
+            roles[n] = "left out"
+            se[n] = sd
+            det[n] = (f"not determined (trial fit {value:.4g} ± {sd:.3g}, "
+                      f"< {SELECT_T:g} SE): kept at 0")
+
+    truth = _common_truth([*surge_logs, *sway_logs])
+    t_h = time.perf_counter()
+    heldout = tuple(fit_report(params, log) for log in heldout_logs)
+    heldout_truth = ()
+    if heldout_logs:
+        truths = [log.truth() for log in heldout_logs]
+        if all(t is not None for t in truths):
+            heldout_truth = tuple(fit_report(t, log) for t, log in zip(truths, heldout_logs))
+    heldout_s = time.perf_counter() - t_h
+    if not heldout_logs:
+        notes.append("no held-out run (header '# use: heldout'): the fit is not checked on "
+                     "data it did not see")
+
+    rows = []
+    for n in PARAM_NAMES:
+        role = roles.get(n)
+        if n in fixed:
+            role = "fixed"
+        elif n in KNOWN_PARAMS:
+            role = "known"
+        note = det.get(n, "")
+        if n == anchor:
+            note = "sets the scale"
+        true_value = ratio_error = None
+        if truth is not None:
+            true_value = getattr(truth, n)
+            if (n not in KNOWN_PARAMS and n != anchor
+                    and abs(true_value) > NEGLIGIBLE_RATIO * scales[n]):
+                ratio_error = (getattr(params, n) / getattr(params, anchor)) / (
+                    true_value / getattr(truth, anchor)) - 1.0
+        rows.append(ParameterReport(
+            name=n, guess=getattr(guess, n) if n not in KNOWN_PARAMS else getattr(start, n),
+            estimate=getattr(params, n), std_error=se.get(n, math.nan), role=role or "known",
+            note=note, true=true_value, ratio_error=ratio_error,
+        ))
+    return SysidResult(params, guess, anchor, anchor_note, tuple(rows), tuple(stages), heldout,
+                       heldout_truth, truth, tuple(notes), heldout_s)
+
+
+# -- presentation ---------------------------------------------------------------------------------
+def format_table(result: SysidResult) -> str:
+    """The human report: stages, the parameter table, the held-out fit, notes."""
+    out = []
+    for st in result.stages:
+        rms = ", ".join(f"{k} {v:.4g}" for k, v in st.rms.items())
+        out.append(f"{st.name} stage: {len(st.logs)} run(s), {st.n_samples} samples, "
+                   f"{st.iterations} IPOPT iterations ({st.status}), fit RMS {rms}")
+        out.append("  runs: " + ", ".join(st.logs))
+    out.append(f"scale: {result.anchor_note}")
+    out.append("")
+    has_truth = result.truth is not None
+    head = f"{'param':<12} {'unit':<7} {'guess':>11} {'estimate':>11} {'std err':>10}"
+    if has_truth:
+        head += f" {'true':>11} {'ratio err':>9}"
+    out.append(head + "  note")
+    out.append("-" * (len(head) + 30))
+    for row in result.parameters:
+        se = "" if math.isnan(row.std_error) else f"{row.std_error:10.4g}"
+        line = (f"{row.name:<12} {PARAM_INFO[row.name].unit:<7} {row.guess:11.5g} "
+                f"{row.estimate:11.5g} {se:>10}")
+        if has_truth:
+            ratio = ("" if row.true is None or row.name in KNOWN_PARAMS or row.name == result.anchor
+                     else "true ~0" if row.ratio_error is None
+                     else f"{100 * row.ratio_error:+8.2f}%")
+            line += f" {row.true:11.5g} {ratio:>9}"
+        note = row.note if row.role == "estimated" else (row.role + (f"; {row.note}" if row.note else ""))
+        out.append(line + "  " + note)
+    if has_truth:
+        out.append(f"ratio err: (estimate/{result.anchor}) / (true/{result.anchor}) - 1; "
+                   "the logs fix the parameters only up to a common scale")
+    for k, fit in enumerate(result.heldout):
+        out.append("")
+        out.append(f"held-out {fit.source} ({fit.duration_s:.0f} s, not in the fit): "
+                   f"heading RMS {fit.heading_rms_deg:.3f} deg, surge speed RMS "
+                   f"{fit.speed_rms_mps:.4f} m/s, yaw rate RMS {fit.yaw_rate_rms_degps:.3f} deg/s")
+        if k < len(result.heldout_truth):
+            t = result.heldout_truth[k]
+            out.append(f"  (true model on the same log: {t.heading_rms_deg:.3f} deg, "
+                       f"{t.speed_rms_mps:.4f} m/s, {t.yaw_rate_rms_degps:.3f} deg/s: the noise floor)")
+    for note in result.notes:
+        out.append(f"note: {note}")
+    return "\n".join(out)
+
+
+def result_to_dict(result: SysidResult) -> dict:
+    """A JSON-ready summary of the result (SI units, angles of the fit report in degrees)."""
+
+    def clean(v):
+        return None if v is None or (isinstance(v, float) and math.isnan(v)) else v
+
+    return {
+        "anchor": result.anchor,
+        "anchor_note": result.anchor_note,
+        "parameters": [
+            {"name": r.name, "unit": PARAM_INFO[r.name].unit, "guess": r.guess,
+             "estimate": r.estimate, "std_error": clean(r.std_error), "role": r.role,
+             "note": r.note, "true": clean(r.true), "ratio_error": clean(r.ratio_error)}
+            for r in result.parameters
+        ],
+        "stages": [
+            {"name": s.name, "logs": list(s.logs), "free": list(s.free), "samples": s.n_samples,
+             "ipopt_iterations": s.iterations, "status": s.status, "cost": s.cost,
+             "fit_rms": dict(s.rms), "build_s": s.build_s, "solve_s": s.solve_s,
+             "covariance_s": s.covariance_s}
+            for s in result.stages
+        ],
+        "heldout": [
+            {"log": f.source, "heading_rms_deg": f.heading_rms_deg,
+             "speed_rms_mps": f.speed_rms_mps, "yaw_rate_rms_degps": f.yaw_rate_rms_degps,
+             "samples": f.n_samples}
+            for f in result.heldout
+        ],
+        "notes": list(result.notes),
+    }
