@@ -11,8 +11,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
-
 COVER_PERP_M = 0.3
 COVER_ANGLE_DEG = 3.0
 FALSE_FAR_M = 1.0
@@ -42,6 +40,7 @@ def score_scan(world, simulator, pose, segments, detection_config, radius_m: flo
     own hull does not hide it, and no other surface is in the way (2-D line of sight). With
     the scan's cloud given, also how much of that has returns near it (`sampled_m`).
     """
+    import numpy as np
     from scipy.spatial import cKDTree
 
     from controller.detection import crop_mask
@@ -91,6 +90,8 @@ def run_benchmark(world, step_m: float = 10.0, radius_m: float = 50.0, seed: int
                   detection_config=None) -> dict:
     """Scan, detect and score every `step_m` along the centre line; the benchmark's JSON."""
     import time
+
+    import numpy as np
 
     from controller.detection import DEFAULT, detect_segments
 
@@ -166,12 +167,14 @@ def run_benchmark(world, step_m: float = 10.0, radius_m: float = 50.0, seed: int
 def register_bench(sub) -> None:
     p = sub.add_parser(
         "detection", help="LiDAR wall detection: coverage, false positives, time per scan",
-        description="Scans the demo canal every STEP metres with the simulated LiDARs, "
+        description="Scans a canal (the demo canal by default) every STEP metres with the simulated LiDARs, "
         "detects wall segments, and prints JSON: coverage of the visible wall within RADIUS "
         "(within 0.3 m and 3 deg), detected length farther than 1 m from any true surface, "
         "points and segments per scan, and simulation and detection time per scan.",
     )
-    p.add_argument("--scenario", default="demo", help="canal to scan (only 'demo' for now)")
+    p.add_argument("--scenario", default="demo", metavar="FILE",
+                   help="scenario file (TOML) whose canal to scan; 'demo' (default): the "
+                   "built-in demo canal")
     p.add_argument("--step", type=float, default=10.0, help="metres between scans (10)")
     p.add_argument("--radius", type=float, default=50.0, help="range scored, metres (50)")
     p.add_argument("--offset", type=float, default=0.0,

@@ -11,15 +11,14 @@ DEMO_NAMES = ("demo",)
 
 
 def load_world(scenario):
-    """The canal world to use: the built-in demo (scenario files arrive with issue 6)."""
-    from controller.errors import InputError
-
+    """The canal world to use: the built-in demo canal, or the canal of a scenario file."""
     from ..demo_canal import demo_canal
 
     if scenario is None or str(scenario) in DEMO_NAMES:
         return demo_canal()
-    raise InputError(f"--scenario {scenario!r}: scenario files are not supported yet; "
-                     "use 'demo' (the built-in demo canal) or leave --scenario out")
+    from ..scenario_file import load_scenario
+
+    return load_scenario(scenario).world
 
 
 def register(sub) -> None:
@@ -30,7 +29,8 @@ def register(sub) -> None:
         "paper's: raw cloud (top and side), cropped cloud, segments over the true walls.",
     )
     p.add_argument("--scenario", default=None, metavar="FILE",
-                   help="canal to use; for now only 'demo' (the default)")
+                   help="scenario file (TOML) whose canal to use; 'demo' or none: the "
+                   "built-in demo canal")
     p.add_argument("--at", type=float, required=True, metavar="S",
                    help="distance along the canal's centre line, metres")
     p.add_argument("--offset", type=float, default=0.0,

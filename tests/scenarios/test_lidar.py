@@ -212,11 +212,22 @@ def test_detect_writes_a_png(tmp_path, capsys):
     assert "segments" in text and "covered" in text
 
 
-def test_detect_rejects_scenario_files_for_now(tmp_path, capsys):
-    assert main(["detect", "--scenario", "canal.toml", "--at", "10", "-o",
+def test_detect_takes_the_canal_of_a_scenario_file(tmp_path, capsys):
+    path = tmp_path / "short.toml"
+    path.write_text('[scenario]\nname = "short"\nduration_s = 60\n\n[canal]\n'
+                    'centre_line = [[0, 0], [120, 0]]\nwidth_m = 14\n\n'
+                    '[route]\nwaypoints = [[0, 0], [120, 0]]\n')
+    out = tmp_path / "short.png"
+    assert main(["detect", "--scenario", str(path), "--at", "60", "-o", str(out)]) == 0
+    assert out.exists() and "segments" in capsys.readouterr().out
+
+
+def test_detect_names_a_missing_scenario_file(tmp_path, capsys):
+    missing = tmp_path / "canal.toml"
+    assert main(["detect", "--scenario", str(missing), "--at", "10", "-o",
                  str(tmp_path / "x.png")]) == 2
     err = capsys.readouterr().err
-    assert "--scenario 'canal.toml'" in err and "demo" in err and "Traceback" not in err
+    assert str(missing) in err and "no such scenario file" in err and "Traceback" not in err
 
 
 def test_detect_rejects_a_distance_off_the_canal(tmp_path, capsys):
