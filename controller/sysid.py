@@ -429,6 +429,16 @@ def _merge_passes(passes: Sequence[StageReport], last: StageReport) -> StageRepo
     )
 
 
+def _safe_inverse(A: np.ndarray, floor: float = 1e-12) -> np.ndarray:
+    """Inverse of a symmetric information matrix, scaled to unit diagonal first; directions
+    it cannot see get huge variances (eigenvalues floored), never the zero variance that a
+    pseudo-inverse would give them."""
+    d = np.sqrt(np.clip(np.diag(A), 1e-300, None))
+    vals, vecs = np.linalg.eigh(A / np.outer(d, d))
+    inv = (vecs / np.maximum(vals, floor)) @ vecs.T
+    return inv / np.outer(d, d)
+
+
 def _covariance(datas, free, est: BoatParams, scales, wa, x0s, f_d, active, straight):
     """Gauss-Newton covariance of the free parameters, each run's fitted x0 a nuisance.
 
@@ -487,12 +497,12 @@ def _covariance(datas, free, est: BoatParams, scales, wa, x0s, f_d, active, stra
                                                else math.sqrt(var))
     A = J.T @ (wrow[:, None] * J)
     B = J.T @ ((wrow**2 * sigma2)[:, None] * J)
-    A_inv = np.linalg.pinv(A, rcond=1e-12)
+    A_inv = _safe_inverse(A)
     S = np.array([scales[n] for n in free])
     cov = (A_inv @ B @ A_inv)[:n_free, :n_free] * np.outer(S, S)
     # information about the parameters with the initial states profiled out (Schur complement)
     Att, Atz, Azz = A[:n_free, :n_free], A[:n_free, n_free:], A[n_free:, n_free:]
-    info = Att - Atz @ np.linalg.pinv(Azz) @ Atz.T if Azz.size else Att
+    info = Att - Atz @ _safe_inverse(Azz) @ Atz.T if Azz.size else Att
     return cov, info, rms
 
 

@@ -1,0 +1,127 @@
+"""System identification on generated logs (the quick set), and its refusals."""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from controller import maneuvers as m
+from controller import sysid
+from controller.errors import InputError
+from controller.logs import read_log, write_log
+from controller.params import IDENTIFIED
+
+RATIO_5 = ("Xu", "Xuu", "c")
+RATIO_10 = ("m22", "m33", "Yv", "Nr")
+
+
+@pytest.fixture(scope="module")
+def logs():
+    """The quick runs with realistic noise, the zigzag made like a real log: no sway speed,
+    yaw rate at half the rate of the rest."""
+    out = m.generate(seed=1, noise="realistic", runs=m.QUICK_RUNS)
+    zig = out["03_zigzag_20_50"]
+    states = zig.states.copy()
+    states[:, 4] = np.nan
+    states[1::2, 5] = np.nan
+    out["03_zigzag_20_50"] = dataclasses.replace(zig, states=states)
+    return out
+
+
+@pytest.fixture(scope="module")
+def result(logs):
+    return sysid.identify(list(logs.values()))
+
+
+def ratio_error(result, name):
+    return next(r.ratio_error for r in result.parameters if r.name == name)
+
+
+def test_initial_guess_comes_from_the_dimensions_only():
+    guess = sysid.initial_guess(sysid.BoatDimensions())
+    heavier = sysid.initial_guess(sysid.BoatDimensions(mass_kg=3400.0))
+    for name in ("m11", "m22", "m33", "Yv", "Nr", "Xuu", "c"):
+        assert getattr(guess, name) != pytest.approx(getattr(IDENTIFIED, name), rel=0.05)
+    assert heavier.m11 > guess.m11 and heavier.m33 > guess.m33
+    # m11: the weight plus Soding's surge added mass, 2.7 rho V^(5/3) / L^2
+    assert guess.m11 == pytest.approx(1700 + 2.7 * 1000 * 1.7 ** (5 / 3) / 7.9**2)
+
+
+def test_surge_ratios_within_5_percent(result):
+    assert result.anchor == "m11"
+    for name in RATIO_5:
+        assert abs(ratio_error(result, name)) < 0.05, name
+
+
+def test_sway_yaw_ratios_within_10_percent(result):
+    for name in RATIO_10:
+        assert abs(ratio_error(result, name)) < 0.10, name
+
+
+def test_every_estimate_has_a_standard_error_and_undetermined_terms_are_named(result):
+    rows = {r.name: r for r in result.parameters}
+    for name in RATIO_5 + RATIO_10:
+        assert rows[name].role == "estimated"
+        assert 0 < rows[name].std_error < 0.2 * abs(rows[name].estimate)
+    nrr = rows["Nrr"]
+    assert math.isfinite(nrr.std_error) and nrr.std_error > 0
+    if nrr.role == "left out":
+        assert nrr.estimate == 0.0 and "not determined" in nrr.note
+    assert rows["m11"].role == "fixed" and math.isnan(rows["m11"].std_error)
+    table = sysid.format_table(result)
+    assert "Söding" in table and "std err" in table and "ratio err" in table
+
+
+def test_heldout_run_checks_the_fit_and_never_enters_it(result):
+    fitted = [name for stage in result.stages for name in stage.logs]
+    assert "04_heldout_zigzag_10_30" not in fitted
+    (fit,) = result.heldout
+    assert fit.source == "04_heldout_zigzag_10_30"
+    assert fit.heading_rms_deg < 1.0 and fit.speed_rms_mps < 0.05
+    assert fit.yaw_rate_rms_degps < 0.5
+
+
+def test_noise_free_logs_are_recovered_closely():
+    runs = (m.QUICK_RUNS[0],)
+    log = m.generate(seed=1, noise="none", runs=runs)["01_acceleration"]
+    res = sysid.identify([log], sysid.SysidConfig(fixed={"m22": 1800.0}))
+    for name in RATIO_5:
+        assert abs(ratio_error(res, name)) < 1e-3
+    assert any("no sway-yaw run" in n for n in res.notes)
+
+
+def test_fixing_c_moves_the_scale_anchor():
+    log = m.generate(seed=2, noise="realistic", runs=(m.QUICK_RUNS[0],))["01_acceleration"]
+    res = sysid.identify([log], sysid.SysidConfig(fixed={"c": IDENTIFIED.c}))
+    assert res.anchor == "c" and res.params.c == IDENTIFIED.c
+    # with the true c fixed, the absolute values come out near the truth
+    assert res.params.m11 == pytest.approx(IDENTIFIED.m11, rel=0.05)
+
+
+def short_log(tmp_path, logs, n):
+    log = logs["01_acceleration"]
+    cut = dataclasses.replace(log, time_s=log.time_s[:n], states=log.states[:n],
+                              commands=log.commands[:n])
+    path = tmp_path / "short.csv"
+    write_log(path, cut)
+    return read_log(path)
+
+
+def test_a_log_too_short_to_identify_anything_names_file_line_and_column(tmp_path, logs):
+    short = short_log(tmp_path, logs, 5)
+    with pytest.raises(InputError) as exc:
+        sysid.identify([short])
+    msg = str(exc.value)
+    assert str(tmp_path / "short.csv") in msg and "too short" in msg
+    assert "column 'u'" in msg and ":" + str(short.line_of(0)) in msg
+
+
+def test_no_surge_run_is_refused(logs):
+    with pytest.raises(InputError, match="no surge run"):
+        sysid.identify([logs["03_zigzag_20_50"]])
+
+
+def test_unknown_fixed_parameter_is_refused():
+    with pytest.raises(InputError, match="--fix m44"):
+        sysid.SysidConfig(fixed={"m44": 1.0})
