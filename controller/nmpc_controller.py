@@ -66,6 +66,13 @@ class NmpcStep:
         return float(-self.slack_m.min()) if self.slack_m.size else 0.0
 
 
+def steady_throttle(speed_mps, boat) -> np.ndarray:
+    """nT (%) that holds a surge speed in still water: c_eff nT^2 = -(X_u u + X_u|u| u|u|)."""
+    u = np.maximum(np.asarray(speed_mps, float), 0.0)
+    drag = -(boat.Xu * u + boat.Xuu * u * u)
+    return np.sqrt(np.maximum(drag, 0.0) / boat.c_eff)
+
+
 def _finite_vector(value, size: int, what: str) -> np.ndarray:
     try:
         arr = np.asarray(value, float).reshape(-1)
@@ -119,8 +126,7 @@ class NmpcController:
         self._plan: np.ndarray | None = None
         self._progress_m = 0.0
         self._path: WaypointPath | None = None
-        self._waypoints: np.ndarray | None = None
-        self._waypoints_given = None
+        self._waypoints_given: np.ndarray | None = None
         self.consecutive_failures = 0
 
     # -- the step ---------------------------------------------------------------------------
@@ -189,14 +195,16 @@ class NmpcController:
     # -- pieces -----------------------------------------------------------------------------
     def _set_path(self, waypoints) -> None:
         """A new waypoint list restarts the progress along the path; the same one keeps it."""
-        if self._waypoints is not None and waypoints is self._waypoints_given:
+        try:
+            given = np.array(waypoints, float)
+        except (TypeError, ValueError):
+            given = None  # waypoint_path says what is wrong
+        if given is not None and self._waypoints_given is not None \
+                and given.shape == self._waypoints_given.shape \
+                and np.array_equal(given, self._waypoints_given):
             return
-        path = waypoint_path(waypoints)
-        if self._waypoints is not None and np.array_equal(path.polyline.points, self._waypoints):
-            self._waypoints_given = waypoints
-            return
-        self._path, self._waypoints = path, path.polyline.points
-        self._waypoints_given = waypoints
+        self._path = waypoint_path(waypoints)
+        self._waypoints_given = given
         self._progress_m = 0.0
 
     def _solve(self, w, p, w_ref, lbw, ubw) -> SqpResult:
@@ -247,12 +255,26 @@ class NmpcController:
         return w
 
     def _safe_guess(self, x_init: np.ndarray, reference: Reference) -> np.ndarray:
-        """The reference itself, holding the throttle and centring the steering, no slack."""
-        states = np.zeros((self.config.horizon + 1, NX))
+        """The reference itself, no slack, steering centred, and the throttle moving at its
+        rate limit toward the steady throttle of each stage's reference speed.
+
+        The ramp matters: thrust goes with nT |nT|, so a guess at nT = 0 (a boat at rest)
+        linearises to a boat that can neither speed up nor steer, and its QP fails.
+        """
+        c = self.config
+        N, Ts = c.horizon, c.step_s
+        states = np.zeros((N + 1, NX))
         states[:, :4] = reference.states[:, :4]
-        states[:, 6] = x_init[6]
+        target = steady_throttle(reference.states[:, 3], c.boat)
+        nT = np.empty(N + 1)
+        nT[0] = x_init[6]
+        for k in range(N):
+            nT[k + 1] = nT[k] + np.clip(target[k + 1] - nT[k], -c.dnT_max * Ts, c.dnT_max * Ts)
+        states[:, 6] = np.clip(nT, -c.nT_max, c.nT_max)
         states[0, :NX_BOAT] = x_init
-        return self.ocp.pack(states, np.zeros((self.config.horizon, NU)))
+        inputs = np.zeros((N, NU))
+        inputs[:, 0] = np.diff(states[:, 6]) / Ts
+        return self.ocp.pack(states, inputs)
 
     def _output(self, plan, act, reference, result: SqpResult, fallback: str,
                 t0: float) -> NmpcStep:

@@ -107,6 +107,18 @@ def test_cold_start_converges_and_matches_ipopt():
     assert rti.step(X0, ACT0, segs, canal.waypoints, 2.0).stats.ok
 
 
+@pytest.mark.parametrize("current", [(0.0, 0.0), (0.0, 0.3), (0.3, 0.0)])
+def test_a_boat_at_rest_between_walls_starts_cleanly(current):
+    """From rest with the throttle at 0: the first guess must give the QP thrust to work
+    with (thrust goes with nT |nT|), else every QP fails."""
+    canal = straight_canal(width_m=16.0)
+    ctl = NmpcController(CFG, max_failures=1)
+    run = closed_loop(ctl, canal, np.zeros(6), np.zeros(2), steps=100, current=current)
+    assert not run.failure and all(s.stats.ok for s in run.steps)
+    assert run.states[-1, 3] > 0.5  # under way
+    check_bounds(run)
+
+
 def test_a_second_process_finds_the_compiled_code_in_the_cache(rti):
     assert rti.compiled_info.compiled, "no compiler here: the fallback is tested elsewhere"
     library = rti.compiled_info.library
