@@ -186,6 +186,7 @@ class StageReport:
     build_s: float
     solve_s: float
     covariance_s: float
+    passes: int = 1  # NLPs solved: the core, then one trial per optional term
 
 
 @dataclass(frozen=True)
@@ -386,6 +387,7 @@ def _solve_stage(name: str, datas: Sequence[_Data], free: Sequence[str], start: 
     nlp = {"x": ca.vertcat(*w), "f": cost, "g": ca.vertcat(*g)}
     opts = {
         "ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False,
+        "show_eval_warnings": False,  # IPOPT backs off from a trial step that overflows
         "ipopt.max_iter": config.max_iter, "ipopt.tol": config.tol,
     }
     solver = ca.nlpsol("sysid_" + name.replace("-", "_"), "ipopt", nlp, opts)
@@ -425,7 +427,7 @@ def _merge_passes(passes: Sequence[StageReport], last: StageReport) -> StageRepo
         iterations=sum(p.iterations for p in passes), status=last.status, cost=last.cost,
         rms=last.rms, build_s=sum(p.build_s for p in passes),
         solve_s=sum(p.solve_s for p in passes),
-        covariance_s=sum(p.covariance_s for p in passes),
+        covariance_s=sum(p.covariance_s for p in passes), passes=len(passes),
     )
 
 
@@ -767,7 +769,7 @@ def result_to_dict(result: SysidResult) -> dict:
             {"name": s.name, "logs": list(s.logs), "free": list(s.free), "samples": s.n_samples,
              "ipopt_iterations": s.iterations, "status": s.status, "cost": s.cost,
              "fit_rms": dict(s.rms), "build_s": s.build_s, "solve_s": s.solve_s,
-             "covariance_s": s.covariance_s}
+             "covariance_s": s.covariance_s, "passes": s.passes}
             for s in result.stages
         ],
         "heldout": [

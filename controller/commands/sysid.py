@@ -117,7 +117,8 @@ def bench_run(args) -> int:
         "runs": "quick" if args.quick else "paper",
         "generate_logs_s": round(t1 - t0, 3),
         "stages": {
-            s.name: {"samples": s.n_samples, "ipopt_iterations": s.iterations,
+            s.name: {"samples": s.n_samples, "nlp_solves": s.passes,
+                     "ipopt_iterations": s.iterations,
                      "build_s": round(s.build_s, 3), "solve_s": round(s.solve_s, 3),
                      "covariance_s": round(s.covariance_s, 3), "status": s.status}
             for s in result.stages

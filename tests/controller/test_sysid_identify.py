@@ -125,3 +125,11 @@ def test_no_surge_run_is_refused(logs):
 def test_unknown_fixed_parameter_is_refused():
     with pytest.raises(InputError, match="--fix m44"):
         sysid.SysidConfig(fixed={"m44": 1.0})
+
+
+def test_identification_is_deterministic():
+    log = m.generate(seed=4, noise="realistic", runs=(m.QUICK_RUNS[1],))["02_deceleration"]
+    config = sysid.SysidConfig(fixed={"m22": 1800.0})
+    a, b = sysid.identify([log], config), sysid.identify([log], config)
+    assert a.params == b.params
+    assert [r.std_error for r in a.parameters][:9] == [r.std_error for r in b.parameters][:9]
