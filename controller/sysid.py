@@ -6,9 +6,18 @@ with f_d the RK4 discretisation of `controller.model.boat_ode` over each log's o
 intervals (multiple shooting: every sample's state is a variable, tied by the dynamics).
 Decoupled as in the paper: surge first (acceleration and deceleration runs, W = diag(0,0,0,1,0,0),
 parameters m11 Xu Xuu c), then sway-yaw (zigzags, W = diag(1,1,100,0,100,100), parameters
-m22 m33 Yv Yr Nv Nr Yvv Yrr Nvv Nrr) with the surge part fixed. A sample whose state was not
-measured has zero weight; each run's initial state is estimated with the parameters (the
-components a stage does not weight are held at their first measured value).
+m22 m33 Yv Yr Nv Nr Yvv Yrr Nvv Nrr) with the surge part fixed. The surge stage fits the
+surge equation alone (straight running: nS, v, r taken as zero). A sample whose state was not
+measured has zero weight; each run's initial state is estimated with the parameters (a
+position the stage does not fit is held at its first measurement).
+
+One zigzag at one speed does not separate the quadratic and cross sway-yaw terms from the
+linear ones (with realistic noise their standard errors exceed their size, and fitting them
+all at once trades Y_v against Y_v|v| and N_r against N_r|r|). So the sway-yaw stage fits the
+linear core m22 m33 Yv Nr first, then tries each optional term (OPTIONAL_TERMS) in turn and
+keeps it only if its estimate exceeds two standard errors (forward selection); the others stay
+0 and are reported with the trial fit's estimate and standard error. `select=False` fits all
+ten at once.
 
 Scale: the model is unchanged when every force-like parameter is multiplied by one factor, so
 logs fix the parameters only up to that factor. One surge parameter anchors it: by default m11,
