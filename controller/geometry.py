@@ -173,3 +173,66 @@ def simplify_polyline(points, tolerance_m: float) -> np.ndarray:
             keep[k] = True
             stack += [(i, k), (k, j)]
     return pts[keep]
+
+
+def segments_cross(a1, b1, a2, b2) -> np.ndarray:
+    """(N, M) mask: segment i of (a1, b1) properly crosses segment j of (a2, b2)."""
+    def cross(o, p, q):
+        return (p[..., 0] - o[..., 0]) * (q[..., 1] - o[..., 1]) - (
+            p[..., 1] - o[..., 1]) * (q[..., 0] - o[..., 0])
+
+    A1, B1 = a1[:, None, :], b1[:, None, :]
+    A2, B2 = a2[None, :, :], b2[None, :, :]
+    d1, d2 = cross(A2, B2, A1), cross(A2, B2, B1)
+    d3, d4 = cross(A1, B1, A2), cross(A1, B1, B2)
+    return (d1 * d2 < 0) & (d3 * d4 < 0)
+
+
+def self_intersection(points) -> tuple[int, int] | None:
+    """Indices (i, j) of two non-adjacent legs of a polyline that cross, or None."""
+    pts = np.asarray(points, float)
+    a, b = pts[:-1], pts[1:]
+    hits = segments_cross(a, b, a, b)
+    hits &= np.abs(np.subtract.outer(np.arange(len(a)), np.arange(len(a)))) > 1
+    if not hits.any():
+        return None
+    i, j = np.argwhere(hits)[0]
+    return int(i), int(j)
+
+
+def offset_polyline(points, offset_m) -> np.ndarray:
+    """The polyline moved sideways by `offset_m` (per vertex or scalar; > 0 to the right).
+
+    Right of the direction of travel is starboard: (dx, dy) -> (-dy, dx) in NED. Vertices use
+    mitred normals (capped at 2x) so straight legs stay parallel to the original.
+    """
+    pts = np.asarray(points, float)
+    d = np.diff(pts, axis=0)
+    d /= np.hypot(*d.T)[:, None]
+    n_leg = np.column_stack([-d[:, 1], d[:, 0]])
+    n = np.vstack([n_leg[:1], n_leg[:-1] + n_leg[1:], n_leg[-1:]])
+    n /= np.maximum(np.hypot(*n.T), 1e-12)[:, None]
+    cos_half = np.concatenate([[1.0], np.einsum("ij,ij->i", n[1:-1], n_leg[1:]), [1.0]])
+    scale = 1.0 / np.clip(cos_half, 0.5, 1.0)
+    off = np.broadcast_to(np.asarray(offset_m, float), (len(pts),))
+    return pts + n * (off * scale)[:, None]
+
+
+def clip_segments_to_circle(a, b, centre, radius_m: float) -> np.ndarray:
+    """The parts of segments a-b inside a circle, as (M, 4) rows (x_c, y_c, theta, length)."""
+    a, b = np.asarray(a, float).reshape(-1, 2), np.asarray(b, float).reshape(-1, 2)
+    c = np.asarray(centre, float).reshape(-1)[:2]
+    d = b - a
+    dd = np.einsum("ij,ij->i", d, d)
+    f = a - c
+    bq = np.einsum("ij,ij->i", f, d)
+    disc = bq * bq - dd * (np.einsum("ij,ij->i", f, f) - radius_m**2)
+    root = np.sqrt(np.maximum(disc, 0.0))
+    safe = np.where(dd > 0, dd, 1.0)
+    t0 = np.clip((-bq - root) / safe, 0.0, 1.0)
+    t1 = np.clip((-bq + root) / safe, 0.0, 1.0)
+    keep = (disc > 0) & (t1 > t0)
+    p0, p1 = (a + t0[:, None] * d)[keep], (a + t1[:, None] * d)[keep]
+    dv = p1 - p0
+    return np.column_stack([(p0 + p1) / 2.0, np.arctan2(dv[:, 1], dv[:, 0]),
+                            np.hypot(*dv.T)]).reshape(-1, 4)

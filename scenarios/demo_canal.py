@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .world import CanalWorld, Obstacle, Wall, offset_polyline
+from controller.geometry import offset_polyline
+
+from .world import CanalWorld, Obstacle, Wall
 
 # (kind, value, radius_m): "straight" value = length in m, "turn" value = angle in degrees,
 # positive to starboard (clockwise, as headings).

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from controller.geometry import Segment, simplify_polyline
+from controller.geometry import clip_segments_to_circle, simplify_polyline
 from scenarios.world import CanalWorld
 
 
@@ -27,22 +27,6 @@ class KnownWalls:
 
     def segments(self, time_s, true_state, estimated_state) -> np.ndarray:
         return clip_segments_to_circle(self._a, self._b, np.asarray(true_state)[:2], self.range_m)
-
-
-def clip_segments_to_circle(a, b, centre, radius_m: float) -> np.ndarray:
-    """The parts of segments a-b inside a circle, as (M, 4) rows (x_c, y_c, theta, length)."""
-    c = np.asarray(centre, float).reshape(2)
-    d = b - a
-    dd = np.einsum("ij,ij->i", d, d)
-    f = a - c
-    bq = np.einsum("ij,ij->i", f, d)
-    disc = bq * bq - dd * (np.einsum("ij,ij->i", f, f) - radius_m**2)
-    root = np.sqrt(np.maximum(disc, 0.0))
-    t0 = np.clip((-bq - root) / dd, 0.0, 1.0)
-    t1 = np.clip((-bq + root) / dd, 0.0, 1.0)
-    keep = (disc > 0) & (t1 > t0)
-    p0, p1 = (a + t0[:, None] * d)[keep], (a + t1[:, None] * d)[keep]
-    return np.array([Segment.from_endpoints(u, v).as_array() for u, v in zip(p0, p1)]).reshape(-1, 4)
 
 
 class LidarPerception:

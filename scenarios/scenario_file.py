@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 
 from controller.errors import InputError
-from controller.geometry import Polyline
+from controller.geometry import Polyline, segments_cross
 from controller.params import IDENTIFIED, BoatParams
 
-from .world import OBSTACLE_KINDS, CanalWorld, Obstacle, Wall, _segments_cross
+from .world import OBSTACLE_KINDS, CanalWorld, Obstacle, Wall
 
 CONTROLLERS = ("nmpc", "los-pid", "lexicographic")
 PERCEPTIONS = ("lidar", "known-walls")
@@ -296,7 +296,7 @@ def check_waypoints_inside(world: CanalWorld, waypoints: np.ndarray, source: str
             if o.z_bottom_m == 0 and o.contains(p)[0]:
                 raise InputError(f"{where} lies inside obstacle {o.name!r}")
         foot = line.project(p)[1]
-        if np.hypot(*(p - foot)) > 1e-9 and _segments_cross(foot[None, :], p[None, :], a, b).any():
+        if np.hypot(*(p - foot)) > 1e-9 and segments_cross(foot[None, :], p[None, :], a, b).any():
             raise InputError(f"{where} lies outside the canal")
 
 

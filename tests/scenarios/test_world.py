@@ -7,7 +7,8 @@ import pytest
 
 from controller.errors import InputError
 from scenarios.demo_canal import demo_canal
-from scenarios.world import CanalWorld, Obstacle, Wall, offset_polyline, self_intersection
+from controller.geometry import offset_polyline, self_intersection
+from scenarios.world import CanalWorld, Obstacle, Wall
 
 
 def straight(width=12.0, length=100.0, **kw):
