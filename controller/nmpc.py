@@ -135,12 +135,6 @@ class NmpcConfig:
         """Lower bound of s_i: the minor half axis R_b + d_p + s_i stays >= min_half_axis_m."""
         return -(self.hull_radius_m + self.separation_m) + self.min_half_axis_m
 
-    def structure(self) -> dict:
-        """What is compiled into the problem (a change needs a new build)."""
-        return {"horizon": self.horizon, "step_s": self.step_s,
-                "rk4_substeps": self.rk4_substeps, "segment_slots": self.segment_slots,
-                "smooth_eps": self.smooth_eps}
-
 
 # -- the runtime parameters of the problem: one flat vector --------------------------------
 @dataclass(frozen=True)
@@ -305,12 +299,6 @@ class Ocp:
             if k < self.N:
                 d[self.input_index(k)] = 2 * np.array([*c.r_diag, 0.0])
         return np.maximum(d, eps)
-
-    def reference_vector(self, reference_states: np.ndarray) -> np.ndarray:
-        """w_ref from r_0..r_Np as (Np+1, 8): zero inputs and slacks."""
-        states = np.zeros((self.N + 1, NX))
-        states[:, :NX_BOAT] = reference_states
-        return self.pack(states, np.zeros((self.N, NU)))
 
     # -- bounds -----------------------------------------------------------------------------
     def bounds(self, x_init: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
