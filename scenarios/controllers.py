@@ -73,3 +73,75 @@ class NmpcController:
             predicted=st.states, slack_m=st.max_slack_m, segments_used=segments,
             stats={"qp_iterations": st.stats.qp_iterations, "fallback": st.stats.fallback},
         )
+
+
+class PlannedLosPid:
+    """A planner replanning at `replan_period_s`, tracked by LOS guidance with PID at 10 Hz.
+
+    Baseline 1 (after Villa et al. 2020, as the paper used it): the planner is the NMPC
+    itself, iterated to convergence (SQP) since it plans once a second. Baseline 2: the
+    lexicographic planner of the paper's Appendix. The tracker never sees the segments.
+    """
+
+    def __init__(self, name: str, planner, params, waypoints, target_speed_mps: float,
+                 replan_period_s: float = 1.0, control_period_s: float = 0.1):
+        self.name = name
+        self._plan = planner  # (state, actuators, segments) -> (path (K, 2), ok, status, predicted)
+        self._tracker = LosPidTracker(params, LosPidConfig(target_speed_mps=target_speed_mps))
+        self._tracker.set_path(waypoints)
+        self._every = max(1, int(round(replan_period_s / control_period_s)))
+        self._dt = control_period_s
+        self._k = 0
+        self._predicted = None
+        self._status = "ok"
+
+    def step(self, time_s, state, actuators, segments) -> Decision:
+        if self._k == 0:
+            self._tracker.reset(actuators)
+        if self._k % self._every == 0:
+            path, ok, status, predicted = self._plan(state, actuators, segments)
+            self._status = status
+            if ok and len(path) >= 2:
+                self._tracker.set_path(path, state)
+                self._predicted = predicted
+        self._k += 1
+        command = self._tracker.step(state, self._dt)
+        return Decision(command=command, status=self._status, predicted=self._predicted,
+                        segments_used=segments)
+
+
+def nmpc_planned_los_pid(scenario) -> PlannedLosPid:
+    """Baseline 1: the NMPC as a 1 Hz planner, LOS-PID tracking its predicted path."""
+    from controller.errors import SolverError
+    from controller.nmpc import NmpcConfig
+    from controller.nmpc_controller import NmpcController as Core
+
+    core = Core(NmpcConfig(separation_m=scenario.d_p_m, boat=scenario.controller_params,
+                           control_period_s=1.0), method="sqp")
+
+    def plan(state, actuators, segments):
+        try:
+            st = core.step(state, actuators, segments, scenario.waypoints,
+                           scenario.target_speed_mps, elapsed_s=1.0)
+        except SolverError as exc:  # keep tracking the last plan; the planner recovers next time
+            core.reset()
+            return None, False, f"planner failed: {exc}", None
+        return st.states[:, :2], True, st.stats.status, st.states
+
+    return PlannedLosPid("los-pid", plan, scenario.controller_params, scenario.waypoints,
+                         scenario.target_speed_mps)
+
+
+def lexicographic_los_pid(scenario) -> PlannedLosPid:
+    """Baseline 2: the lexicographic planner at 1 Hz, LOS-PID tracking its path."""
+    from controller.baselines.lexicographic import LexicographicConfig, LexicographicPlanner
+
+    planner = LexicographicPlanner(scenario.waypoints,
+                                   LexicographicConfig(separation_m=scenario.d_p_m))
+
+    def plan(state, actuators, segments):
+        p = planner.plan(state[:3], segments)
+        return p.path, True, p.status, p.states
+
+    return PlannedLosPid("lexicographic", plan, scenario.controller_params, scenario.waypoints,
+                         scenario.target_speed_mps)

@@ -48,6 +48,14 @@ def make_perception(scenario: Scenario):
 def make_controller(scenario: Scenario, name: str | None = None):
     name = name or scenario.controller
     if name == "los-pid":
+        from scenarios.controllers import nmpc_planned_los_pid
+
+        return nmpc_planned_los_pid(scenario)
+    if name == "lexicographic":
+        from scenarios.controllers import lexicographic_los_pid
+
+        return lexicographic_los_pid(scenario)
+    if name == "los-pid-waypoints":
         from scenarios.controllers import LosPidController
 
         return LosPidController(scenario.controller_params, scenario.waypoints,
@@ -65,7 +73,10 @@ def _los_pid_config(scenario: Scenario):
     return LosPidConfig(target_speed_mps=scenario.target_speed_mps)
 
 
-CONTROLLERS = ("nmpc", "los-pid")
+CONTROLLERS = ("nmpc", "los-pid", "lexicographic", "los-pid-waypoints")
+"""nmpc: the paper's NMPC; los-pid: baseline 1 (NMPC planner at 1 Hz + LOS-PID);
+lexicographic: baseline 2 (the Appendix's planner + LOS-PID); los-pid-waypoints: LOS-PID on the
+waypoints with no planner (blind to walls: a reference point, not a baseline)."""
 
 
 def run_scenario(scenario: Scenario, out_dir: Path, controller: str | None = None,
