@@ -8,6 +8,7 @@ vectorised over numpy arrays.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -97,20 +98,20 @@ class Polyline:
         pts = np.asarray(self.points, float).reshape(-1, 2)
         object.__setattr__(self, "points", pts)
 
-    @property
+    @cached_property
     def seg_lengths(self) -> np.ndarray:
         return np.hypot(*np.diff(self.points, axis=0).T)
 
-    @property
+    @cached_property
     def cumulative(self) -> np.ndarray:
         """Arc length at each vertex, starting at 0."""
         return np.concatenate([[0.0], np.cumsum(self.seg_lengths)])
 
-    @property
+    @cached_property
     def length(self) -> float:
         return float(self.seg_lengths.sum())
 
-    @property
+    @cached_property
     def headings(self) -> np.ndarray:
         """Direction of each leg (rad, from north clockwise)."""
         d = np.diff(self.points, axis=0)

@@ -34,3 +34,21 @@ def heading_from_course(course: float, u: float, v: float) -> float:
     if u < 0.2:  # at low speed the crab angle is noise: steer the course directly
         return float(course)
     return float(wrap_angle(course - np.arctan2(v, u)))
+
+
+def lookahead_course(position, path, s_m: float, lookahead_m: float) -> float:
+    """Course toward the point `lookahead_m` further along `path` (a geometry.Polyline) than
+    the boat's projection at arc length `s_m`.
+
+    On a straight leg this is exactly Fossen's law, pi_p + atan(-y_e / Delta); on a path of
+    short legs (a planner's trajectory) it also sees the curve ahead, where the current leg's
+    direction alone would not.
+    """
+    if lookahead_m <= 0:
+        raise ValueError(f"LOS lookahead must be positive, got {lookahead_m}")
+    target = path.at(s_m + lookahead_m)[0][0]
+    if s_m + lookahead_m > path.length:  # past the end: continue along the last leg
+        target = target + (s_m + lookahead_m - path.length) * np.array(
+            [np.cos(path.headings[-1]), np.sin(path.headings[-1])])
+    d = target - np.asarray(position, float)[:2]
+    return float(np.arctan2(d[1], d[0]))

@@ -1,8 +1,9 @@
 """Baseline 1's tracker (after Villa et al. 2020): LOS guidance with PID heading and speed.
 
 The path is a polyline: the scenario's waypoints, or a planner's output replaced at its own
-rate. At each 0.1 s step: find the current leg by a forward search from the previous
-progress, compute the LOS course and the heading that gives it, and let two PIDs turn the
+rate. At each 0.1 s step: project the boat on the path by a forward search from the previous
+progress, steer the course toward the point a lookahead further along the path (Fossen's
+lookahead law, generalised to a curved path), compute the heading that gives it, and let two PIDs turn the
 heading and speed errors into steering and throttle. Both commands move no faster than the
 actuators can (10 %/s, 40 %/s), as every controller in the comparison must.
 
@@ -21,7 +22,7 @@ import numpy as np
 from ..errors import InputError
 from ..geometry import Polyline, wrap_angle
 from ..params import BoatParams
-from .los import heading_from_course, los_course
+from .los import heading_from_course, lookahead_course
 from .pid import Pid, PidGains
 
 
@@ -75,10 +76,9 @@ class LosPidTracker:
         if self._path is None:
             raise InputError("LOS-PID: no path set")
         x = np.asarray(state, float)
-        s, _, _, leg = self._path.project(x[:2], s_min=self._progress)
+        s, _, _, _ = self._path.project(x[:2], s_min=self._progress)
         self._progress = s
-        leg_start = self._path.points[leg]
-        course = los_course(x[:2], leg_start, self._path.headings[leg], self.config.lookahead_m)
+        course = lookahead_course(x[:2], self._path, s, self.config.lookahead_m)
         psi_d = heading_from_course(course, x[3], x[4])
         e_psi = float(wrap_angle(psi_d - x[2]))
         steer_pid = self._heading.step(e_psi, dt, measurement_rate=x[5])

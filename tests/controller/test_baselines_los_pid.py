@@ -4,7 +4,9 @@ import numpy as np
 import pytest
 
 from controller import model
-from controller.baselines.los import cross_track_error, heading_from_course, los_course
+from controller.baselines.los import (cross_track_error, heading_from_course, lookahead_course,
+                                      los_course)
+from controller.geometry import Polyline
 from controller.baselines.los_pid import LosPidTracker, steady_throttle
 from controller.baselines.pid import Pid, PidGains
 from controller.params import IDENTIFIED
@@ -25,6 +27,19 @@ def test_los_course_hand_computed():
     assert los_course([5 * np.cos(0.3), 5 * np.sin(0.3)], [0, 0], 0.3, 10.0) == pytest.approx(0.3)
     with pytest.raises(ValueError):
         los_course([0, 0], [0, 0], 0.0, 0.0)
+
+
+def test_lookahead_course_is_fossens_law_on_a_straight_leg():
+    path = Polyline([[0, 0], [100 * np.cos(0.3), 100 * np.sin(0.3)]])
+    for p in ([10.0, 1.0], [20.0, 12.0], [40.0, 5.0]):
+        s = path.project(p)[0]
+        assert lookahead_course(p, path, s, 12.0) == pytest.approx(los_course(p, [0, 0], 0.3, 12.0))
+
+
+def test_lookahead_course_sees_the_curve_ahead():
+    # a path of short legs turning east after 10 m: 12 m ahead lies beyond the turn
+    path = Polyline([[0, 0], [2, 0], [4, 0], [6, 0], [8, 0], [10, 0], [10, 2], [10, 4], [10, 6]])
+    assert lookahead_course([0, 0], path, 0.0, 12.0) > 0.1
 
 
 def test_heading_compensates_crab_angle():
