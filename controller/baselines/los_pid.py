@@ -31,7 +31,8 @@ class LosPidConfig:
     target_speed_mps: float = 2.0
     lookahead_m: float = 12.0  # ~1.5 boat lengths
     heading: PidGains = field(default_factory=lambda: PidGains(
-        kp=300.0, ki=5.0, kd=120.0, out_min=-100.0, out_max=100.0, rate_max=40.0))
+        kp=300.0, ki=5.0, kd=120.0, out_min=-100.0, out_max=100.0, rate_max=40.0,
+        derivative_filter_s=0.3))
     speed: PidGains = field(default_factory=lambda: PidGains(
         kp=25.0, ki=3.0, kd=0.0, out_min=-100.0, out_max=100.0, rate_max=10.0))
 

@@ -66,6 +66,17 @@ def test_pid_rate_limit_and_derivative_on_measurement():
     assert pid.step(0.0, 0.1, measurement_rate=3.0) == pytest.approx(-6.0)
 
 
+def test_pid_derivative_filter_smooths_a_noisy_rate():
+    raw = Pid(PidGains(kp=0.0, kd=1.0))
+    filtered = Pid(PidGains(kp=0.0, kd=1.0, derivative_filter_s=0.3))
+    rng = np.random.default_rng(0)
+    rates = 1.0 + rng.normal(0, 0.5, 400)
+    a = np.array([raw.step(0.0, 0.1, measurement_rate=r) for r in rates])
+    b = np.array([filtered.step(0.0, 0.1, measurement_rate=r) for r in rates])
+    assert b[200:].mean() == pytest.approx(-1.0, abs=0.1)  # passes the steady rate
+    assert b[200:].std() < 0.5 * a[200:].std()  # and attenuates the noise
+
+
 def test_steady_throttle_inverts_the_surge_balance():
     assert steady_throttle(IDENTIFIED, 1.83) == pytest.approx(42.0, abs=0.1)
 
