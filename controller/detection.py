@@ -93,7 +93,7 @@ def detect_segments(points, pose, config: DetectionConfig = DEFAULT) -> np.ndarr
     """
     cloud = _checked_cloud(points)
     x, y, psi = _checked_pose(pose)
-    body = _fit_segments(cloud[crop_mask(cloud, config), :2].astype(float), config)
+    body = _fit_segments(_cropped_xy(cloud, config), config)
     if not len(body):
         return np.zeros((0, 4))
     c, s = math.cos(psi), math.sin(psi)
@@ -107,14 +107,29 @@ def detect_segments(points, pose, config: DetectionConfig = DEFAULT) -> np.ndarr
 def crop_mask(points, config: DetectionConfig = DEFAULT) -> np.ndarray:
     """Which points of a clean (N, 3) body-frame cloud the detector keeps (paper Fig. (c))."""
     p = np.asarray(points)
-    x, y, z = p[:, 0], p[:, 1], p[:, 2]
-    keep = (z <= -config.min_height_m) & (z >= -config.max_height_m)  # z is down
-    ay = np.abs(y)
-    keep &= (np.abs(x) <= config.range_m) & (ay <= config.range_m)
+    keep = np.zeros(len(p), bool)
+    keep[_crop_index(p, config)] = True
+    return keep
+
+
+def _crop_index(p: np.ndarray, config: DetectionConfig) -> np.ndarray:
+    """Indices of the points `crop_mask` keeps, in order. The height band (a few percent of
+    a scan: the wall faces) is tested first on the whole cloud, the rest on what it keeps."""
+    z = p[:, 2]
+    idx = np.flatnonzero((z <= -config.min_height_m) & (z >= -config.max_height_m))  # z down
+    sub = p.take(idx, axis=0)  # (take is several times faster than p[idx] here)
+    x, ay = sub[:, 0], np.abs(sub[:, 1])
     x0, x1 = config.hull_x_m
+    r = config.range_m
+    keep = (x >= -r) & (x <= r) & (ay <= r)
     keep &= ~((x >= x0) & (x <= x1) & (ay <= config.hull_half_width_m))
     keep &= ~((x >= x0 - config.wake_length_m) & (x < x0) & (ay <= config.wake_half_width_m))
-    return keep
+    return idx[keep]
+
+
+def _cropped_xy(cloud: np.ndarray, config: DetectionConfig) -> np.ndarray:
+    """(N, 2) float64 x, y of the points the crop keeps."""
+    return cloud.take(_crop_index(cloud, config), axis=0)[:, :2].astype(float)
 
 
 # -- input checks -----------------------------------------------------------------------
@@ -130,7 +145,9 @@ def _checked_cloud(points) -> np.ndarray:
                          f"frame), got {arr.shape}")
     if arr.dtype.kind != "f":
         arr = arr.astype(float)
-    finite = np.isfinite(arr[:, 0] + arr[:, 1] + arr[:, 2])  # NaN or inf spoils the sum
+    if np.isfinite(arr.sum()):  # NaN or inf anywhere spoils the sum (one cheap pass)
+        return arr
+    finite = np.isfinite(arr).all(axis=1)
     bad = int(len(arr) - np.count_nonzero(finite))
     if bad:
         warnings.warn(f"detection: dropped {bad} of {len(arr)} points with NaN or inf "
@@ -167,8 +184,9 @@ def _fit_segments(xy: np.ndarray, cfg: DetectionConfig) -> np.ndarray:
     chords = _refit(_merge(pieces, cfg), xy, cfg)
     if not chords:
         return np.zeros((0, 4))
-    a, b = _join_corners(np.array([c[0] for c in chords]), np.array([c[1] for c in chords]), cfg)
-    return np.array([_as_centre_form(p, q) for p, q in zip(a, b)]).reshape(-1, 4)
+    ends = np.array(chords, float).reshape(-1, 2, 2)
+    a, b = _join_corners(ends[:, 0], ends[:, 1], cfg)
+    return _as_centre_form(a, b)
 
 
 def _join_corners(a: np.ndarray, b: np.ndarray, cfg: DetectionConfig):
@@ -185,15 +203,20 @@ def _join_corners(a: np.ndarray, b: np.ndarray, cfg: DetectionConfig):
     sin = np.abs(u[seg][:, None, 0] * u[seg][None, :, 1] - u[seg][:, None, 1] * u[seg][None, :, 0])
     pairs = np.argwhere(close & (sin >= math.sin(math.radians(20.0)))
                         & (seg[:, None] < seg[None, :]))
+    if not len(pairs):
+        return a, b
     moved = ends.copy()
-    for i, j in pairs:
-        p, r = ends[i], u[seg[i]]
-        q, s = ends[j], u[seg[j]]
-        denom = r[0] * s[1] - r[1] * s[0]
-        t = ((q[0] - p[0]) * s[1] - (q[1] - p[1]) * s[0]) / denom
-        x = p + t * r
-        if np.hypot(*(x - p)) <= cfg.corner_join_m and np.hypot(*(x - q)) <= cfg.corner_join_m:
-            moved[i], moved[j] = x, x
+    for i, j in pairs.tolist():
+        px, py = ends[i].tolist()
+        rx, ry = u[seg[i]].tolist()
+        qx, qy = ends[j].tolist()
+        sx, sy = u[seg[j]].tolist()
+        denom = rx * sy - ry * sx
+        t = ((qx - px) * sy - (qy - py) * sx) / denom
+        x, y = px + t * rx, py + t * ry
+        if (math.hypot(x - px, y - py) <= cfg.corner_join_m
+                and math.hypot(x - qx, y - qy) <= cfg.corner_join_m):
+            moved[i] = moved[j] = (x, y)
     return moved[:m], moved[m:]
 
 
@@ -204,32 +227,48 @@ def _chords(pts: np.ndarray, cfg: DetectionConfig):
     range noise), form a path; Douglas-Peucker splits that path wherever it strays more than
     `chord_tolerance_m` from the chord between its ends, so a corner is split at the corner
     and a bend of radius R becomes chords within sqrt(2 tol / R) rad of it. Each piece is
-    then fitted to its own points (total least squares).
+    then fitted to its own points (total least squares). Chords are ((x, y), (x, y)) pairs.
     """
-    centre, w = _principal(pts)
-    t = (pts - centre) @ w
+    line = _principal(pts)
+    cx, cy, wx, wy = line
+    t = pts @ np.array((wx, wy))
+    t -= cx * wx + cy * wy
     order = np.argsort(t)
     pts, t = pts[order], t[order]
-    if t[-1] - t[0] < 2 * cfg.min_length_m:
-        return [(centre + t[0] * w, centre + t[-1] * w)]
-    bins = np.floor((t - t[0]) / (2 * cfg.cell_m)).astype(int)
-    starts = np.flatnonzero(np.r_[True, np.diff(bins) > 0])
-    counts = np.diff(np.r_[starts, len(t)])
+    t0, t1 = float(t[0]), float(t[-1])
+    if t1 - t0 < 2 * cfg.min_length_m:
+        return [((cx + t0 * wx, cy + t0 * wy), (cx + t1 * wx, cy + t1 * wy))]
+    bins = ((t - t0) * (0.5 / cfg.cell_m)).astype(np.intp)  # t - t0 >= 0: truncation floors
+    starts = np.flatnonzero(bins[1:] != bins[:-1])
+    starts += 1
+    starts = np.concatenate(([0], starts))
+    counts = np.diff(np.append(starts, len(t)))
     path = np.add.reduceat(pts, starts, axis=0) / counts[:, None]
     path_t = np.add.reduceat(t, starts) / counts
     cuts = sorted(_douglas_peucker(path, path_t, 0, len(path) - 1, cfg))
-    edges = [t[0] - 1.0] + [path_t[k] for k in cuts] + [t[-1] + 1.0]
+    if not cuts:
+        pieces = [(pts, line)]
+    else:
+        edges = np.concatenate(([t0 - 1.0], path_t[cuts], [t1 + 1.0]))
+        first = np.searchsorted(t, edges[:-1], "left")
+        last = np.searchsorted(t, edges[1:], "right")
+        pieces = [(pts[i:j], None) for i, j in zip(first.tolist(), last.tolist())]
     out = []
-    for lo, hi in zip(edges[:-1], edges[1:]):
-        sub = pts[(t >= lo) & (t <= hi)]
-        if len(sub) >= 2:
-            c, v = _principal(sub)
-            # Refit without the points off the chord (a perpendicular face at a corner).
-            close = np.abs((sub - c) @ np.array([-v[1], v[0]])) <= cfg.fit_band_m
-            if close.sum() >= max(2, cfg.min_points) and not close.all():
-                c, v = _principal(sub[close])
-            s = (sub - c) @ v
-            out.append((c + s.min() * v, c + s.max() * v))
+    for sub, fit in pieces:
+        if len(sub) < 2:
+            continue
+        cx, cy, vx, vy = fit or _principal(sub)
+        # Refit without the points off the chord (a perpendicular face at a corner).
+        off = sub @ np.array((-vy, vx))
+        off -= cy * vx - cx * vy
+        close = np.abs(off) <= cfg.fit_band_m
+        n_close = int(np.count_nonzero(close))
+        if n_close >= max(2, cfg.min_points) and n_close < len(close):
+            cx, cy, vx, vy = _principal(sub[close])
+        s = sub @ np.array((vx, vy))
+        s0 = float(s.min()) - (cx * vx + cy * vy)
+        s1 = float(s.max()) - (cx * vx + cy * vy)
+        out.append(((cx + s0 * vx, cy + s0 * vy), (cx + s1 * vx, cy + s1 * vy)))
     return out
 
 
@@ -237,28 +276,33 @@ def _douglas_peucker(path, path_t, i, j, cfg) -> list[int]:
     """Indices of `path` strictly between i and j where it must be split (see _chords)."""
     if j - i < 2:
         return []
-    a, b = path[i], path[j]
-    d = b - a
-    length = math.hypot(d[0], d[1])
+    ax, ay = path[i].tolist()
+    bx, by = path[j].tolist()
+    dx, dy = bx - ax, by - ay
+    length = math.hypot(dx, dy)
     if length <= 0:
         return []
-    off = np.abs((path[i + 1:j] - a) @ np.array([-d[1], d[0]])) / length
-    k = i + 1 + int(np.argmax(off))
-    if off[k - i - 1] <= cfg.chord_tolerance_m:
+    off = path[i + 1:j] @ np.array((-dy, dx))
+    off -= ay * dx - ax * dy
+    np.abs(off, out=off)
+    k = int(np.argmax(off))
+    if off[k] / length <= cfg.chord_tolerance_m:
         return []
+    k += i + 1
     if path_t[k] - path_t[i] < cfg.min_length_m or path_t[j] - path_t[k] < cfg.min_length_m:
         return []
     return _douglas_peucker(path, path_t, i, k, cfg) + [k] + _douglas_peucker(path, path_t, k, j, cfg)
 
 
-def _principal(pts: np.ndarray):
-    """Centre and unit direction of the total-least-squares line through points (the major
-    axis of their 2x2 covariance, in closed form)."""
+def _principal(pts: np.ndarray) -> tuple[float, float, float, float]:
+    """Centre (x, y) and unit direction (x, y) of the total-least-squares line through the
+    points (the major axis of their 2x2 covariance, in closed form), as floats."""
     n = len(pts)
-    centre = pts.sum(axis=0) / n
-    m = pts.T @ pts / n - np.outer(centre, centre)
-    angle = 0.5 * math.atan2(2.0 * m[0, 1], m[0, 0] - m[1, 1])
-    return centre, np.array([math.cos(angle), math.sin(angle)])
+    sx, sy = float(pts[:, 0].sum()), float(pts[:, 1].sum())  # (column sums: faster)
+    mxx, mxy, _, myy = (pts.T @ pts).ravel().tolist()
+    cx, cy = sx / n, sy / n
+    angle = 0.5 * math.atan2(2.0 * (mxy / n - cx * cy), (mxx / n - cx * cx) - (myy / n - cy * cy))
+    return cx, cy, math.cos(angle), math.sin(angle)
 
 
 def _occupancy(xy: np.ndarray, cfg: DetectionConfig):
@@ -266,20 +310,29 @@ def _occupancy(xy: np.ndarray, cfg: DetectionConfig):
     the points in each occupied cell: the grid is what Hough sees, the centroids what the
     lines are fitted to (as exact as the points, a fraction of their number)."""
     n = int(math.ceil(2 * cfg.range_m / cfg.cell_m))
-    ij = np.floor((xy + cfg.range_m) / cfg.cell_m).astype(np.int64)
-    inside = ((ij >= 0) & (ij < n)).all(axis=1)
-    ij, xy = ij[inside], xy[inside]
-    flat = ij[:, 0] * n + ij[:, 1]
-    cells, which, count = np.unique(flat, return_inverse=True, return_counts=True)
-    centroids = np.column_stack([np.bincount(which, xy[:, k], len(cells)) / count
-                                 for k in range(2)])
+    # (Column by column: reductions along the short axis of an (N, 2) array are slow.)
+    x, y = xy[:, 0], xy[:, 1]
+    i = np.floor((x + cfg.range_m) * (1.0 / cfg.cell_m)).astype(np.intp)
+    j = np.floor((y + cfg.range_m) * (1.0 / cfg.cell_m)).astype(np.intp)
+    inside = (i >= 0) & (i < n) & (j >= 0) & (j < n)
+    if not inside.all():
+        i, j, x, y = i[inside], j[inside], x[inside], y[inside]
+    flat = i * n + j
     grid = np.zeros(n * n, np.uint8)
-    grid[cells] = 255
+    grid[flat] = 255
+    cells = np.flatnonzero(grid.view(bool))  # sorted; (a bool view counts much faster)
+    lookup = np.empty(n * n, np.intp)  # cell -> its index in `cells`; only those entries set
+    lookup[cells] = np.arange(len(cells))
+    which = lookup[flat]
+    count = np.bincount(which, minlength=len(cells))
+    centroids = np.column_stack([np.bincount(which, x, len(cells)) / count,
+                                 np.bincount(which, y, len(cells)) / count])
     return grid.reshape(n, n), centroids
 
 
-def _hough_pieces(grid: np.ndarray, cfg: DetectionConfig) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Probabilistic Hough pieces of the occupancy grid, as body-frame endpoint pairs."""
+def _hough_pieces(grid: np.ndarray, cfg: DetectionConfig) -> list:
+    """Probabilistic Hough pieces of the occupancy grid, as body-frame endpoint pairs
+    ((x, y), (x, y))."""
     import cv2
 
     found = cv2.HoughLinesP(
@@ -289,94 +342,129 @@ def _hough_pieces(grid: np.ndarray, cfg: DetectionConfig) -> list[tuple[np.ndarr
         return []
     px = found.reshape(-1, 4).astype(float)
     # OpenCV returns (column, row) pairs: column is y, row is x; cell centres in metres.
-    a = (px[:, [1, 0]] + 0.5) * cfg.cell_m - cfg.range_m
-    b = (px[:, [3, 2]] + 0.5) * cfg.cell_m - cfg.range_m
-    return list(zip(a, b))
+    ends = (px[:, [1, 0, 3, 2]] + 0.5) * cfg.cell_m - cfg.range_m
+    return [((ax, ay), (bx, by)) for ax, ay, bx, by in ends.tolist()]
 
 
 def _merge(pieces, cfg: DetectionConfig):
     """Greedy clustering, longest first: a piece joins a line when it is parallel within
     `merge_angle_deg`, both ends lie within `merge_offset_m` of the line, and it overlaps
-    the line or leaves a gap shorter than `max_gap_m`. Returns (a, b) endpoint pairs."""
-    order = sorted(pieces, key=lambda ab: -np.hypot(*(ab[1] - ab[0])))
-    tol = math.radians(cfg.merge_angle_deg)
-    lines = []  # [origin, unit direction, s_min, s_max]
-    for a, b in order:
-        d = b - a
-        length = math.hypot(d[0], d[1])
+    the line or leaves a gap shorter than `max_gap_m`. Returns (a, b) endpoint pairs.
+    (A few dozen pieces: plain floats, no arrays.)"""
+    hypot = math.hypot
+    order = sorted(pieces, key=lambda ab: -hypot(ab[1][0] - ab[0][0], ab[1][1] - ab[0][1]))
+    sin_tol = math.sin(math.radians(cfg.merge_angle_deg))
+    offset = cfg.merge_offset_m
+    lines = []  # [origin x, y, unit direction x, y, s_min, s_max]
+    for (ax, ay), (bx, by) in order:
+        length = hypot(bx - ax, by - ay)
         if length <= 0:
             continue
-        u = d / length
+        ux, uy = (bx - ax) / length, (by - ay) / length
         for line in lines:
-            o, v, s0, s1 = line
-            if abs(u[0] * v[1] - u[1] * v[0]) > math.sin(tol):
+            ox, oy, vx, vy, s0, s1 = line
+            if abs(ux * vy - uy * vx) > sin_tol:
                 continue
-            n = np.array([-v[1], v[0]])
-            if abs(n @ (a - o)) > cfg.merge_offset_m or abs(n @ (b - o)) > cfg.merge_offset_m:
+            if (abs(vx * (ay - oy) - vy * (ax - ox)) > offset
+                    or abs(vx * (by - oy) - vy * (bx - ox)) > offset):
                 continue
-            sa, sb = sorted((v @ (a - o), v @ (b - o)))
-            gap = _max_gap(cfg, min(np.hypot(*a), np.hypot(*b), np.hypot(*(o + s0 * v)),
-                                    np.hypot(*(o + s1 * v))))
+            sa, sb = sorted((vx * (ax - ox) + vy * (ay - oy), vx * (bx - ox) + vy * (by - oy)))
+            gap = cfg.max_gap_m + cfg.gap_per_range * min(
+                hypot(ax, ay), hypot(bx, by), hypot(ox + s0 * vx, oy + s0 * vy),
+                hypot(ox + s1 * vx, oy + s1 * vy))
             if sa > s1 + gap or sb < s0 - gap:
                 continue
-            line[2], line[3] = min(s0, sa), max(s1, sb)
+            line[4], line[5] = min(s0, sa), max(s1, sb)
             break
         else:
-            lines.append([a.copy(), u, 0.0, length])
-    return [(o + s0 * v, o + s1 * v) for o, v, s0, s1 in lines]
+            lines.append([ax, ay, ux, uy, 0.0, length])
+    return [((ox + s0 * vx, oy + s0 * vy), (ox + s1 * vx, oy + s1 * vy))
+            for ox, oy, vx, vy, s0, s1 in lines]
 
 
 def _refit(lines, xy: np.ndarray, cfg: DetectionConfig):
     """Fit each line to the points near it (total least squares), longest line first, each
     point used once; split where the points leave a gap longer than the allowed gap there,
-    and each run into chords (`_chords`). Returns the chords as (a, b) endpoint pairs."""
+    and each run into chords (`_chords`). Returns the chords as (a, b) endpoint pairs.
+
+    A few hundred cells and a dozen lines: the per-line work is a handful of array
+    operations, with the line itself in plain floats."""
     free = np.ones(len(xy), bool)
     out = []
-    for a, b in sorted(lines, key=lambda ab: -np.hypot(*(ab[1] - ab[0]))):
-        d = b - a
-        length = math.hypot(d[0], d[1])
+    reach = float(_max_gap(cfg, cfg.range_m))
+    hypot = math.hypot
+    order = sorted(lines, key=lambda ab: -hypot(ab[1][0] - ab[0][0], ab[1][1] - ab[0][1]))
+    for (ax, ay), (bx, by) in order:
+        length = hypot(bx - ax, by - ay)
         if length <= 0:
             continue
-        o, v = a, d / length
+        ox, oy, vx, vy = ax, ay, (bx - ax) / length, (by - ay) / length
         sel = None
         for _ in range(2):  # select, fit, select again around the fitted line
-            n = np.array([-v[1], v[0]])
-            rel = xy - o
-            s = rel @ v
-            near = free & (np.abs(rel @ n) <= cfg.inlier_m)
-            reach = _max_gap(cfg, cfg.range_m)
-            near &= (s >= -reach) & (s <= length + reach)
-            if near.sum() < cfg.min_points:
+            # Along-line and perpendicular coordinates of every cell, relative to the middle
+            # of the line: |along| <= length / 2 + reach and |perp| <= inlier_m selects.
+            half = 0.5 * length
+            perp = xy @ np.array((-vy, vx))
+            perp -= oy * vx - ox * vy
+            near = np.abs(perp, out=perp) <= cfg.inlier_m
+            near &= free
+            sel = np.flatnonzero(near)
+            along = xy[sel] @ np.array((vx, vy))
+            along -= ox * vx + oy * vy + half
+            sel = sel[np.abs(along, out=along) <= half + reach]
+            if len(sel) < cfg.min_points:
                 sel = None
                 break
-            sel = np.flatnonzero(near)
             pts = xy[sel]
-            centre, w = _principal(pts)
-            w = w if w @ v >= 0 else -w
-            s_pts = (pts - centre) @ w
-            o, v = centre + s_pts.min() * w, w
-            length = float(s_pts.max() - s_pts.min())
+            cx, cy, wx, wy = _principal(pts)
+            if wx * vx + wy * vy < 0:
+                wx, wy = -wx, -wy
+            s = pts @ np.array((wx, wy))
+            s0 = float(s.min())
+            length = float(s.max()) - s0
+            s -= s0  # along the fitted line, from its first point
+            s0 -= cx * wx + cy * wy
+            ox, oy, vx, vy = cx + s0 * wx, cy + s0 * wy, wx, wy
         if sel is None:
             continue
-        s = (xy[sel] - o) @ v
-        order = np.argsort(s)
-        s, sel = s[order], sel[order]
-        mid = o + 0.5 * (s[1:] + s[:-1])[:, None] * v  # the middle of each gap
-        breaks = np.flatnonzero(np.diff(s) > _max_gap(cfg, np.hypot(mid[:, 0], mid[:, 1]))) + 1
-        for run_s, run in zip(np.split(s, breaks), np.split(sel, breaks)):
-            if len(run) < cfg.min_points or run_s[-1] - run_s[0] < cfg.min_length_m:
+        order_s = np.argsort(s)
+        s, sel = s[order_s], sel[order_s]
+        gaps = np.diff(s)
+        wide = np.flatnonzero(gaps > cfg.max_gap_m)  # the allowed gap is never smaller
+        if len(wide):
+            mid = 0.5 * (s[wide + 1] + s[wide])  # the middle of each gap
+            allowed = _max_gap(cfg, np.hypot(ox + mid * vx, oy + mid * vy))
+            wide = wide[gaps[wide] > allowed]
+        bounds = [0] + (wide + 1).tolist() + [len(s)]
+        for lo, hi in zip(bounds[:-1], bounds[1:]):
+            if hi - lo < cfg.min_points or s[hi - 1] - s[lo] < cfg.min_length_m:
                 continue
-            chords = _chords(xy[run], cfg)
+            run = sel[lo:hi]
+            run_xy = xy[run]
+            chords = _chords(run_xy, cfg)
             if not chords:
                 continue
             # Claim only the points on the chords: those of a perpendicular face that the
             # band reached at a corner stay free for that face's own line.
-            ca = np.array([c[0] for c in chords])
-            cb = np.array([c[1] for c in chords])
-            on = point_segment_distance(xy[run], ca, cb).min(axis=1) <= cfg.fit_band_m
             out.extend(chords)
-            free[run[on]] = False
+            free[run[_near_chords(run_xy, chords, cfg.fit_band_m)]] = False
     return out
+
+
+def _near_chords(pts: np.ndarray, chords, band: float) -> np.ndarray:
+    """Which points lie within `band` of one of the chords ((x, y), (x, y))."""
+    near = None
+    for (ax, ay), (bx, by) in chords:
+        dx, dy = bx - ax, by - ay
+        d2 = dx * dx + dy * dy
+        rel = pts - (ax, ay)
+        t = rel @ np.array((dx / d2, dy / d2)) if d2 > 0 else np.zeros(len(pts))
+        np.clip(t, 0.0, 1.0, out=t)
+        rel -= t[:, None] * (dx, dy)
+        rel *= rel
+        m = rel.sum(axis=1) <= band * band
+        near = m if near is None else near | m
+    return near
 
 
 def _max_gap(cfg: DetectionConfig, range_m):
@@ -384,7 +472,8 @@ def _max_gap(cfg: DetectionConfig, range_m):
     return cfg.max_gap_m + cfg.gap_per_range * np.asarray(range_m)
 
 
-def _as_centre_form(a, b) -> np.ndarray:
+def _as_centre_form(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(M, 4) segments (x_c, y_c, theta, length) from endpoint arrays a, b (M, 2)."""
     d = b - a
-    return np.array([(a[0] + b[0]) / 2, (a[1] + b[1]) / 2,
-                     float(_half_turn(math.atan2(d[1], d[0]))), math.hypot(d[0], d[1])])
+    return np.column_stack([0.5 * (a + b), _half_turn(np.arctan2(d[:, 1], d[:, 0])),
+                            np.hypot(d[:, 0], d[:, 1])])

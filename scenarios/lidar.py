@@ -155,6 +155,18 @@ class LidarScan:
     sensor: np.ndarray  # (N,) int, index into the config's mounts; -1 for spray
 
 
+def _ordered(x: np.ndarray) -> np.ndarray:
+    """float32 values as int64 in the same order (-0.0 as 0.0; no NaN expected): sorting
+    and binary search on these are exact comparisons of the floats."""
+    i = (np.asarray(x, np.float32) + np.float32(0.0)).view(np.int32).astype(np.int64)
+    return np.where(i < 0, -(i & 0x7FFFFFFF), i)
+
+
+def _level16(p: float) -> int:
+    """The 16-bit level below which a uniform 16-bit draw falls with probability p."""
+    return int(round(min(max(p, 0.0), 1.0) * 65536))
+
+
 def _cross(ax, ay, bx, by):
     return ax * by - ay * bx
 
@@ -201,8 +213,6 @@ class _Sensor:
         self.bin = bin_of[keep]
         self.tan_el = (dirs_up[keep, 2] / horiz[keep]).astype(f32)
         self.cos_el = horiz[keep].astype(f32)  # horizontal metres per metre of range
-        with np.errstate(divide="ignore"):
-            self.t_water = np.where(self.tan_el < 0, self.height / -self.tan_el, np.inf).astype(f32)
         az = self.bin * self.step
         # Body-frame displacement per metre of horizontal distance, z down.
         self.vec = np.column_stack([np.cos(az), np.sin(az), -self.tan_el]).astype(f32)
@@ -222,37 +232,42 @@ class _Beams:
     height: np.ndarray
     tan_el: np.ndarray
     cos_el: np.ndarray
-    t_water: np.ndarray
     inv_drop: np.ndarray  # 1 / -tan(elevation) for beams going down, else 0
-    vec: tuple  # x, y, z arrays: body displacement per metre of horizontal distance
+    vec: np.ndarray  # (3, n) body displacement per metre of horizontal distance
     origin: tuple  # x, y, z arrays: the beam's sensor position in the body frame
     min_h: np.ndarray
     max_h: np.ndarray
     sensor: np.ndarray
-    hull_points: np.ndarray  # noiseless own-hull returns (x, y, z down)
-    hull_unit: np.ndarray  # their beam directions, for range noise
+    hull_points: np.ndarray  # (3, m) noiseless own-hull returns (x, y, z down)
+    hull_unit: np.ndarray  # (3, m) their beam directions, for range noise
     hull_sensor: np.ndarray
 
     @classmethod
     def join(cls, sensors) -> "_Beams":
+        """All sensors' beams, ordered by bin (so by sensor) and within a bin by elevation:
+        the beams of one column that meet one surface are then one contiguous run."""
         offsets = np.cumsum([0] + [s.bins for s in sensors[:-1]])
         cat = np.concatenate
+        bin_ = cat([s.bin + off for s, off in zip(sensors, offsets)])
+        tan_el = cat([s.tan_el for s in sensors])
+        order = np.lexsort((tan_el, bin_))
+        sort = lambda a: a[order]  # noqa: E731
         return cls(
-            bin=cat([s.bin + off for s, off in zip(sensors, offsets)]),
-            height=cat([np.full(len(s.bin), s.height, np.float32) for s in sensors]),
-            tan_el=cat([s.tan_el for s in sensors]),
-            cos_el=cat([s.cos_el for s in sensors]),
-            t_water=cat([s.t_water for s in sensors]),
-            inv_drop=cat([np.where(s.tan_el < 0, -1.0 / np.minimum(s.tan_el, -1e-9), 0.0)
-                          .astype(np.float32) for s in sensors]),
-            vec=tuple(cat([s.vec[:, i] for s in sensors]) for i in range(3)),
-            origin=tuple(cat([np.full(len(s.bin), s.origin_body[i]) for s in sensors])
+            bin=sort(bin_),
+            height=sort(cat([np.full(len(s.bin), s.height, np.float32) for s in sensors])),
+            tan_el=sort(tan_el),
+            cos_el=sort(cat([s.cos_el for s in sensors])),
+            inv_drop=sort(cat([np.where(s.tan_el < 0, -1.0 / np.minimum(s.tan_el, -1e-9), 0.0)
+                               .astype(np.float32) for s in sensors])),
+            vec=np.ascontiguousarray(sort(cat([s.vec for s in sensors])).T),
+            origin=tuple(sort(cat([np.full(len(s.bin), s.origin_body[i]) for s in sensors]))
                          for i in range(3)),
-            min_h=cat([s.min_h for s in sensors]),
-            max_h=cat([s.max_h for s in sensors]),
-            sensor=cat([np.full(len(s.bin), k, np.int8) for k, s in enumerate(sensors)]),
-            hull_points=cat([s.origin_body + s.hull_r[:, None] * s.hull_dir for s in sensors]),
-            hull_unit=cat([s.hull_dir for s in sensors]),
+            min_h=sort(cat([s.min_h for s in sensors])),
+            max_h=sort(cat([s.max_h for s in sensors])),
+            sensor=sort(cat([np.full(len(s.bin), k, np.int8) for k, s in enumerate(sensors)])),
+            hull_points=np.ascontiguousarray(
+                cat([s.origin_body + s.hull_r[:, None] * s.hull_dir for s in sensors]).T),
+            hull_unit=np.ascontiguousarray(cat([s.hull_dir for s in sensors]).T),
             hull_sensor=cat([np.full(len(s.hull_r), k, np.int8) for k, s in enumerate(sensors)]),
         )
 
@@ -270,6 +285,13 @@ class LidarSimulator:
         self._bin_height = np.concatenate([np.full(s.bins, s.mount.height_m) for s in self.sensors])
         self._beam_start = np.concatenate([[0], np.cumsum([len(s.bin) for s in self.sensors])[:-1]])
         self._normals = self.rng.standard_normal(1 << 20, dtype=np.float32)
+        # Exact per-bin thresholding on tan(elevation) by binary search: each beam's key is
+        # bin * 2**32 + its float32 tan as an order-preserving integer (sorted, exact).
+        beams = self._beams
+        self._keys = (beams.bin.astype(np.int64) << 32) + _ordered(beams.tan_el)
+        n_bins = int(sum(s.bins for s in self.sensors))
+        self._bin_first = np.searchsorted(beams.bin, np.arange(n_bins + 1))  # beam range per bin
+        self._class_of_run = np.tile(np.arange(5, dtype=np.int8), n_bins)
         self.max_range_m = max(m.max_range_m for m in self.config.mounts)
         e = world.edges
         self._obst = e["obstacle"]
@@ -337,10 +359,13 @@ class LidarSimulator:
         psi = pose[2]
         reach = self.max_range_m + 10.0
         origins = self.sensor_positions(pose)
-        points, labels, sensor = self._render(*self._cast(origins, psi, reach))
         spray = self._spray(speed_mps)
-        return LidarScan(np.concatenate([points, spray[0]]),
-                         np.concatenate([labels, spray[1]]),
+        n_spray = len(spray[1])
+        columns, labels, sensor = self._render(*self._cast(origins, psi, reach), n_spray=n_spray)
+        if n_spray:
+            columns[:, -n_spray:] = spray[0].T
+        # (N, 3) view of the (3, N) buffer: no copy, and each coordinate is contiguous.
+        return LidarScan(columns.T, np.concatenate([labels, spray[1]]),
                          np.concatenate([sensor, spray[2]]))
 
     # -- rendering ----------------------------------------------------------------------
@@ -415,14 +440,16 @@ class LidarSimulator:
             t_in, t_out = np.where(in_bin, 0.0, t_in), np.where(in_bin, t_in, t_out)
         return t_face, wall_h, t_back, back_h, t_in, t_out, obst
 
-    def _render(self, t_face, wall_h, t_back, back_h, t_in, t_out, owner):
+    def _render(self, t_face, wall_h, t_back, back_h, t_in, t_out, owner, n_spray=0):
         """Every beam of every sensor at once: which surface its elevation meets first.
 
         Along one column the surfaces are met in a fixed order of elevation: water below
         the wall's foot, the wall face up to its top, the quay top behind it (if the sensor
         is above it), the backdrop, then sky. So per column four thresholds on tan(elevation)
-        classify all its beams with a few comparisons, and distances are computed only for
-        the beams that return.
+        classify all its beams; as the beams are stored by column and elevation, each class
+        is one run of beams per column, found by binary search, and the classes and
+        distances of all beams are runs repeated from per-column tables (no per-beam
+        gathers). The horizontal distance of every class is a + b / -tan(elevation).
         """
         beams = self._beams
         noise = self.config.noise
@@ -434,67 +461,77 @@ class LidarSimulator:
             t2 = np.maximum(t1, (wall_h - h) / t_face)  # wall top
             t3 = np.maximum(t2, np.where(h > wall_h, -(h - wall_h) / t_back, -np.inf))
             t4 = np.maximum(t3, (back_h - h) / t_back)  # backdrop top
-        b = beams.bin
-        tan = beams.tan_el
-        cls = ((tan >= t1.astype(f32)[b]).view(np.int8) + (tan > t2.astype(f32)[b])
-               + (tan >= t3.astype(f32)[b]) + (tan > t4.astype(f32)[b]))
+        # Beams of bin k with tan >= t (or > t) start at this index; the class of a beam is
+        # how many of (tan >= t1, tan > t2, tan >= t3, tan > t4) hold, as before.
+        base = np.arange(len(h), dtype=np.int64) << 32
+        bounds = np.empty((len(h), 6), np.int64)
+        bounds[:, 0], bounds[:, 5] = self._bin_first[:-1], self._bin_first[1:]
+        for q, (t, side) in enumerate(((t1, "left"), (t2, "right"), (t3, "left"),
+                                       (t4, "right"))):
+            bounds[:, q + 1] = np.searchsorted(self._keys, base + _ordered(t.astype(f32)), side)
+        bounds[:, 1:5].sort(axis=1)
+        runs = np.diff(bounds, axis=1).ravel()
         # cls: 0 water, 1 face, 2 quay top, 3 backdrop, 4 sky (LABELS below), 5 obstacle.
-        tables = (t_face.astype(f32), t_back.astype(f32), (h - wall_h).astype(f32))
-        t_obstacle = self._render_obstacles(t_in, t_out, owner, cls, tables)
+        cls = np.repeat(self._class_of_run, runs)
+        zero = np.zeros(len(h))
+        a = np.column_stack([zero, t_face, zero, t_back, np.full(len(h), np.inf)])
+        b = np.column_stack([h, zero, h - wall_h, zero, zero])
+        t_all = np.repeat(a.astype(f32).ravel(), runs)
+        t_all += np.repeat(b.astype(f32).ravel(), runs) * beams.inv_drop
+        self._render_obstacles(t_in, t_out, owner, cls, t_all)
 
-        returns = cls != 4
+        # Beams within range (sky is infinitely far), then dropouts and speckle.
+        returns = t_all >= beams.min_h
+        returns &= t_all <= beams.max_h
         idx = np.flatnonzero(returns)
         lab = cls[idx]
-        u = rng.random(len(idx), dtype=f32)
-        keep = (u >= noise.dropout) & ((lab != 0) | (u < noise.dropout + noise.water_speckle))
+        u = self._uniform16(len(idx))
+        drop, speckle = _level16(noise.dropout), _level16(noise.dropout + noise.water_speckle)
+        keep = (u >= drop) & ((lab != 0) | (u < speckle))
         # (Indexing through flatnonzero is several times faster than with a boolean mask.)
         keep = np.flatnonzero(keep)
         idx, lab = idx[keep], lab[keep]
-        t = self._distance(idx, lab, tables, t_obstacle)
-        ok = np.flatnonzero((t >= beams.min_h[idx]) & (t <= beams.max_h[idx]))
-        idx, lab, t = idx[ok], lab[ok], t[ok]
+        t = t_all[idx]
         t += self._normal(len(idx)) * (f32(noise.range_sigma_m) * beams.cos_el[idx])
-        pts = np.empty((len(idx), 3), f32)
+        # Points as rows x, y, z of one buffer (long contiguous rows: fast arithmetic), with
+        # room for the hull returns and the spray after them; scan_labelled transposes.
+        hull_keep = np.flatnonzero(self._uniform16(beams.hull_points.shape[1]) >= drop)
+        n, m = len(idx), len(hull_keep)
+        out = np.empty((3, n + m + n_spray), f32)
+        pts = out[:, :n]
         for i in range(3):
-            pts[:, i] = t * beams.vec[i][idx]
+            beams.vec[i].take(idx, out=pts[i])
+        pts *= t
         # Beams are ordered by sensor, so each sensor's origin is added to one slice.
         cuts = np.searchsorted(idx, self._beam_start)
-        for k, (lo, hi) in enumerate(zip(cuts, np.r_[cuts[1:], len(idx)])):
-            pts[lo:hi] += self.sensors[k].origin_body
+        for k, (lo, hi) in enumerate(zip(cuts, np.r_[cuts[1:], n])):
+            pts[:, lo:hi] += self.sensors[k].origin_body[:, None]
         label = np.where(lab == 5, np.int8(OBSTACLE), lab)  # classes 0-3 are the labels
-        water = label == WATER
-        if water.any():
-            pts[water, 2] -= rng.uniform(-1.0, 1.0, int(water.sum())).astype(f32) * f32(
+        water = np.flatnonzero(label == WATER)
+        if len(water):
+            pts[2, water] -= rng.uniform(-1.0, 1.0, len(water)).astype(f32) * f32(
                 noise.water_ripple_m)
 
         # Own hull: fixed returns, with dropouts and range noise.
-        keep = np.flatnonzero(rng.random(len(beams.hull_points), dtype=f32) >= noise.dropout)
-        hull = beams.hull_points[keep] + (
-            self._normal(len(keep)) * f32(noise.range_sigma_m))[:, None] * beams.hull_unit[keep]
-        return (np.concatenate([pts, hull]),
-                np.concatenate([label, np.full(len(hull), HULL, np.int8)]),
-                np.concatenate([beams.sensor[idx], beams.hull_sensor[keep]]))
+        hull = out[:, n:n + m]
+        beams.hull_points.take(hull_keep, axis=1, out=hull)
+        hull += beams.hull_unit.take(hull_keep, axis=1) * (
+            self._normal(m) * f32(noise.range_sigma_m))
+        return (out,
+                np.concatenate([label, np.full(m, HULL, np.int8)]),
+                np.concatenate([beams.sensor[idx], beams.hull_sensor[hull_keep]]))
 
-    def _distance(self, idx, cls, tables, t_obstacle):
-        """Horizontal distance to the hit for beams `idx` of classes `cls`."""
-        beams = self._beams
-        t_face, t_back, above_quay = tables
-        b = beams.bin[idx]
-        t = t_face[b]
-        t = np.where(cls == 3, t_back[b], t)
-        t = np.where(cls == 2, above_quay[b] * beams.inv_drop[idx], t)
-        t = np.where(cls == 0, beams.t_water[idx], t)
-        if t_obstacle is not None:
-            t = np.where(cls == 5, t_obstacle[idx], t)
-        return t
-
-    def _render_obstacles(self, t_in, t_out, owner, cls, tables):
+    def _render_obstacles(self, t_in, t_out, owner, cls, t_all):
         """Where a beam meets an obstacle (face, top or underside) before its surface, mark
-        it (class 5) and return the distances; only beams of columns that cross one."""
+        it (class 5) and set its distance in `t_all`; only beams of columns that cross one."""
         beams = self._beams
-        idx = np.flatnonzero((owner >= 0)[beams.bin])
-        if not len(idx):
-            return None
+        cols = np.flatnonzero(owner >= 0)
+        if not len(cols):
+            return
+        first = self._bin_first
+        runs = first[cols + 1] - first[cols]
+        # The beams of those columns (contiguous per column), without a per-beam search.
+        idx = np.repeat(first[cols] - np.cumsum(runs) + runs, runs) + np.arange(int(runs.sum()))
         _, _, _, zb_all, zt_all = self._obst
         f32 = np.float32
         b = beams.bin[idx]
@@ -510,13 +547,14 @@ class LidarSimulator:
         t = np.where((tin > 0) & (zi >= zlo) & (zi <= zhi), tin, np.inf)
         t = np.where((zi > zhi) & (t_top > tin) & (t_top < tout), t_top, t)
         t = np.where((zi < zlo) & (t_under > tin) & (t_under < tout), t_under, t)
-        base = self._distance(idx, cls[idx], tables, None)
-        base = np.where(cls[idx] == 4, np.inf, base)
-        nearer = t < base
-        out = np.full(len(cls), np.inf, np.float32)
-        out[idx[nearer]] = t[nearer]
+        nearer = t < t_all[idx]  # sky is at infinity
+        t_all[idx[nearer]] = t[nearer]
         cls[idx[nearer]] = 5
-        return out
+
+    def _uniform16(self, n: int) -> np.ndarray:
+        """n uniform 16-bit draws (compare with `_level16`): cheaper than float draws, and
+        probabilities resolved to 1/65536."""
+        return np.frombuffer(self.rng.bytes(2 * n), np.uint16)
 
     def _normal(self, n: int) -> np.ndarray:
         """n standard normal draws (float32): a window at a random offset into a table
