@@ -113,23 +113,33 @@ def crop_mask(points, config: DetectionConfig = DEFAULT) -> np.ndarray:
 
 
 def _crop_index(p: np.ndarray, config: DetectionConfig) -> np.ndarray:
-    """Indices of the points `crop_mask` keeps, in order. The height band (a few percent of
-    a scan: the wall faces) is tested first on the whole cloud, the rest on what it keeps."""
+    """Indices of the points `crop_mask` keeps, in order."""
+    return _crop(p, config)[0]
+
+
+def _crop(p: np.ndarray, config: DetectionConfig):
+    """Indices of the points `crop_mask` keeps, and their x and y. The height band (a few
+    percent of a scan: the wall faces) is tested first on the whole cloud, the rest on what
+    it keeps; columns are gathered one by one (fast for C- and Fortran-ordered clouds)."""
     z = p[:, 2]
     idx = np.flatnonzero((z <= -config.min_height_m) & (z >= -config.max_height_m))  # z down
-    sub = p.take(idx, axis=0)  # (take is several times faster than p[idx] here)
-    x, ay = sub[:, 0], np.abs(sub[:, 1])
+    x, y = p[:, 0].take(idx), p[:, 1].take(idx)
+    ay = np.abs(y)
     x0, x1 = config.hull_x_m
     r = config.range_m
     keep = (x >= -r) & (x <= r) & (ay <= r)
     keep &= ~((x >= x0) & (x <= x1) & (ay <= config.hull_half_width_m))
     keep &= ~((x >= x0 - config.wake_length_m) & (x < x0) & (ay <= config.wake_half_width_m))
-    return idx[keep]
+    keep = np.flatnonzero(keep)
+    return idx[keep], x[keep], y[keep]
 
 
 def _cropped_xy(cloud: np.ndarray, config: DetectionConfig) -> np.ndarray:
     """(N, 2) float64 x, y of the points the crop keeps."""
-    return cloud.take(_crop_index(cloud, config), axis=0)[:, :2].astype(float)
+    _, x, y = _crop(cloud, config)
+    xy = np.empty((len(x), 2))
+    xy[:, 0], xy[:, 1] = x, y
+    return xy
 
 
 # -- input checks -----------------------------------------------------------------------
@@ -239,13 +249,14 @@ def _chords(pts: np.ndarray, cfg: DetectionConfig):
     if t1 - t0 < 2 * cfg.min_length_m:
         return [((cx + t0 * wx, cy + t0 * wy), (cx + t1 * wx, cy + t1 * wy))]
     bins = ((t - t0) * (0.5 / cfg.cell_m)).astype(np.intp)  # t - t0 >= 0: truncation floors
-    starts = np.flatnonzero(bins[1:] != bins[:-1])
-    starts += 1
-    starts = np.concatenate(([0], starts))
-    counts = np.diff(np.append(starts, len(t)))
+    change = np.flatnonzero(bins[1:] != bins[:-1])
+    change += 1
+    starts = np.concatenate(([0], change))
+    counts = np.concatenate((change, [len(t)]))
+    counts -= starts
     path = np.add.reduceat(pts, starts, axis=0) / counts[:, None]
     path_t = np.add.reduceat(t, starts) / counts
-    cuts = sorted(_douglas_peucker(path, path_t, 0, len(path) - 1, cfg))
+    cuts = sorted(_douglas_peucker(path, path.tolist(), path_t.tolist(), 0, len(path) - 1, cfg))
     if not cuts:
         pieces = [(pts, line)]
     else:
@@ -272,12 +283,13 @@ def _chords(pts: np.ndarray, cfg: DetectionConfig):
     return out
 
 
-def _douglas_peucker(path, path_t, i, j, cfg) -> list[int]:
-    """Indices of `path` strictly between i and j where it must be split (see _chords)."""
+def _douglas_peucker(path, coords, path_t, i, j, cfg) -> list[int]:
+    """Indices of `path` strictly between i and j where it must be split (see _chords);
+    `coords` and `path_t` are `path` and its positions along the line as Python lists."""
     if j - i < 2:
         return []
-    ax, ay = path[i].tolist()
-    bx, by = path[j].tolist()
+    ax, ay = coords[i]
+    bx, by = coords[j]
     dx, dy = bx - ax, by - ay
     length = math.hypot(dx, dy)
     if length <= 0:
@@ -291,7 +303,8 @@ def _douglas_peucker(path, path_t, i, j, cfg) -> list[int]:
     k += i + 1
     if path_t[k] - path_t[i] < cfg.min_length_m or path_t[j] - path_t[k] < cfg.min_length_m:
         return []
-    return _douglas_peucker(path, path_t, i, k, cfg) + [k] + _douglas_peucker(path, path_t, k, j, cfg)
+    return (_douglas_peucker(path, coords, path_t, i, k, cfg) + [k]
+            + _douglas_peucker(path, coords, path_t, k, j, cfg))
 
 
 def _principal(pts: np.ndarray) -> tuple[float, float, float, float]:
@@ -394,24 +407,27 @@ def _refit(lines, xy: np.ndarray, cfg: DetectionConfig):
     reach = float(_max_gap(cfg, cfg.range_m))
     hypot = math.hypot
     order = sorted(lines, key=lambda ab: -hypot(ab[1][0] - ab[0][0], ab[1][1] - ab[0][1]))
-    for (ax, ay), (bx, by) in order:
+    order = [ab for ab in order if hypot(ab[1][0] - ab[0][0], ab[1][1] - ab[0][1]) > 0]
+    first = _bands(order, xy, reach, cfg.inlier_m)  # the first selection of every line
+    for k, ((ax, ay), (bx, by)) in enumerate(order):
         length = hypot(bx - ax, by - ay)
-        if length <= 0:
-            continue
         ox, oy, vx, vy = ax, ay, (bx - ax) / length, (by - ay) / length
         sel = None
-        for _ in range(2):  # select, fit, select again around the fitted line
+        for it in range(2):  # select, fit, select again around the fitted line
             # Along-line and perpendicular coordinates of every cell, relative to the middle
             # of the line: |along| <= length / 2 + reach and |perp| <= inlier_m selects.
             half = 0.5 * length
-            perp = xy @ np.array((-vy, vx))
-            perp -= oy * vx - ox * vy
-            near = np.abs(perp, out=perp) <= cfg.inlier_m
-            near &= free
-            sel = np.flatnonzero(near)
-            along = xy[sel] @ np.array((vx, vy))
-            along -= ox * vx + oy * vy + half
-            sel = sel[np.abs(along, out=along) <= half + reach]
+            if it == 0:
+                sel = np.flatnonzero(first[k] & free)
+            else:
+                perp = xy @ np.array((-vy, vx))
+                perp -= oy * vx - ox * vy
+                near = np.abs(perp, out=perp) <= cfg.inlier_m
+                near &= free
+                sel = np.flatnonzero(near)
+                along = xy[sel] @ np.array((vx, vy))
+                along -= ox * vx + oy * vy + half
+                sel = sel[np.abs(along, out=along) <= half + reach]
             if len(sel) < cfg.min_points:
                 sel = None
                 break
@@ -451,6 +467,28 @@ def _refit(lines, xy: np.ndarray, cfg: DetectionConfig):
     return out
 
 
+def _bands(lines, xy: np.ndarray, reach: float, inlier: float) -> np.ndarray:
+    """(L, N) mask: cell n lies within `inlier` of line l and along it no farther than
+    `reach` beyond its ends (all lines in one matrix product)."""
+    ends = np.array(lines, float).reshape(-1, 4)
+    d = ends[:, 2:] - ends[:, :2]
+    half = 0.5 * np.hypot(d[:, 0], d[:, 1])
+    v = d / (2 * half)[:, None]
+    # Columns 2l and 2l + 1: along line l (from its middle) and across it.
+    r = np.empty((2, 2 * len(ends)))
+    r[:, 0::2], r[0, 1::2], r[1, 1::2] = v.T, -v[:, 1], v[:, 0]
+    centre = ends[:, :2] + v * half[:, None]
+    offset = np.empty(2 * len(ends))
+    offset[0::2] = centre[:, 0] * v[:, 0] + centre[:, 1] * v[:, 1]
+    offset[1::2] = ends[:, 1] * v[:, 0] - ends[:, 0] * v[:, 1]
+    limit = np.empty(2 * len(ends))
+    limit[0::2], limit[1::2] = half + reach, inlier
+    sp = xy @ r
+    sp -= offset
+    ok = np.abs(sp, out=sp) <= limit
+    return np.ascontiguousarray((ok[:, 0::2] & ok[:, 1::2]).T)
+
+
 def _near_chords(pts: np.ndarray, chords, band: float) -> np.ndarray:
     """Which points lie within `band` of one of the chords ((x, y), (x, y))."""
     near = None
@@ -462,9 +500,12 @@ def _near_chords(pts: np.ndarray, chords, band: float) -> np.ndarray:
         np.clip(t, 0.0, 1.0, out=t)
         rel -= t[:, None] * (dx, dy)
         rel *= rel
-        m = rel.sum(axis=1) <= band * band
+        m = rel @ _ONES2 <= band * band  # (a row sum; sum(axis=1) is slow on (N, 2))
         near = m if near is None else near | m
     return near
+
+
+_ONES2 = np.ones(2)
 
 
 def _max_gap(cfg: DetectionConfig, range_m):

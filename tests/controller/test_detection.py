@@ -225,3 +225,14 @@ def test_height_band_must_be_ordered():
 def test_defaults_crop_below_the_lowest_quay():
     # The paper's walls stand 1-3 m above the water: the band stays under 1 m.
     assert 0.0 < DEFAULT.min_height_m < DEFAULT.max_height_m < 1.0
+
+
+def test_column_major_cloud_gives_the_same_segments():
+    rng = np.random.default_rng(11)
+    cloud = np.vstack([wall_points((-20, 6), (25, 6), rng), wall_points((5, -7), (30, -9), rng)])
+    cloud = cloud.astype(np.float32)
+    pose = (3.0, 4.0, 0.4)
+    a = detect_segments(np.ascontiguousarray(cloud), pose)
+    b = detect_segments(np.asfortranarray(cloud), pose)
+    assert len(a) == 2 and np.array_equal(a, b)
+    assert np.array_equal(crop_mask(np.asfortranarray(cloud)), crop_mask(cloud))

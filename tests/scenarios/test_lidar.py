@@ -248,3 +248,51 @@ def test_bench_detection_prints_one_json_object(capsys):
 
 def test_default_band_is_below_the_demo_quays():
     assert DEFAULT.max_height_m < min(w.height_m for w in demo_canal().walls)
+
+
+def test_ordered_keys_keep_the_order_of_the_floats():
+    from scenarios.lidar import _ordered
+    rng = np.random.default_rng(0)
+    x = np.concatenate([rng.normal(0, 1, 500), rng.normal(0, 1e-6, 100),
+                        [0.0, -0.0, np.inf, -np.inf, 1e-38, -1e-38, 3e38]]).astype(np.float32)
+    k = _ordered(x)
+    for i in range(0, len(x), 7):  # every comparison agrees with the floats'
+        assert np.array_equal(k[i] < k, x[i] < x) and np.array_equal(k[i] == k, x[i] == x)
+
+
+def test_beam_classes_match_per_beam_comparisons():
+    """The run-based classes equal (tan >= t1) + (tan > t2) + (tan >= t3) + (tan > t4) per
+    beam, ties and infinities included."""
+    sim = LidarSimulator(straight(), seed=0)
+    beams = sim._beams
+    n_bins = len(sim._bin_height)
+    rng = np.random.default_rng(1)
+    # Thresholds drawn from the beams' own tans (exact ties), random values, +-inf and -0.
+    pool = np.concatenate([beams.tan_el, rng.uniform(-0.7, 0.7, 1000).astype(np.float32),
+                           np.float32([np.inf, -np.inf, -0.0, 0.0])])
+    t = np.sort(rng.choice(pool, (4, n_bins)), axis=0).astype(float)
+    t[2, ::5] = t[1, ::5]  # t2 == t3: a beam at the tie counts twice
+    cls, runs = sim._classes(*t)
+    tan, b = beams.tan_el, beams.bin
+    t32 = t.astype(np.float32)
+    expect = ((tan >= t32[0][b]).astype(int) + (tan > t32[1][b]) + (tan >= t32[2][b])
+              + (tan > t32[3][b]))
+    assert np.array_equal(cls, expect)
+    assert runs.sum() == len(tan)
+
+
+def test_full_dropout_leaves_no_returns():
+    world = straight()
+    cfg = LidarConfig(noise=LidarNoise(dropout=1.0, spray_points=0))
+    scan = LidarSimulator(world, cfg, seed=1).scan_labelled((0.0, 0.0, 0.0), 2.0)
+    assert scan.points.shape == (0, 3)
+
+
+def test_scan_rows_are_points_whatever_the_memory_layout():
+    world = straight()
+    scan = LidarSimulator(world, seed=5).scan_labelled((0.0, 0.0, 0.0), 2.0)
+    pts = scan.points
+    assert pts.dtype == np.float32 and pts.ndim == 2 and pts.shape[1] == 3
+    assert len(pts) == len(scan.labels) == len(scan.sensor)
+    c = np.ascontiguousarray(pts)
+    assert np.array_equal(c, pts) and np.array_equal(c[:, 2], pts[:, 2])
