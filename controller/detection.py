@@ -230,7 +230,7 @@ def _join_corners(a: np.ndarray, b: np.ndarray, cfg: DetectionConfig):
     return moved[:m], moved[m:]
 
 
-def _chords(pts: np.ndarray, cfg: DetectionConfig):
+def _chords(pts: np.ndarray, cfg: DetectionConfig, line=None, t=None):
     """Split the points of one fitted line into chords where the wall bends.
 
     The points, ordered along the line and averaged in bins two cells long (which tames the
@@ -238,13 +238,17 @@ def _chords(pts: np.ndarray, cfg: DetectionConfig):
     `chord_tolerance_m` from the chord between its ends, so a corner is split at the corner
     and a bend of radius R becomes chords within sqrt(2 tol / R) rad of it. Each piece is
     then fitted to its own points (total least squares). Chords are ((x, y), (x, y)) pairs.
+    `line` (centre and direction) and `t` (positions along it, ascending, points in that
+    order): the fit of exactly these points if the caller has it.
     """
-    line = _principal(pts)
+    if line is None:
+        line = _principal(pts)
+        cx, cy, wx, wy = line
+        t = pts @ np.array((wx, wy))
+        t -= cx * wx + cy * wy
+        order = np.argsort(t)
+        pts, t = pts[order], t[order]
     cx, cy, wx, wy = line
-    t = pts @ np.array((wx, wy))
-    t -= cx * wx + cy * wy
-    order = np.argsort(t)
-    pts, t = pts[order], t[order]
     t0, t1 = float(t[0]), float(t[-1])
     if t1 - t0 < 2 * cfg.min_length_m:
         return [((cx + t0 * wx, cy + t0 * wy), (cx + t1 * wx, cy + t1 * wy))]
@@ -433,7 +437,8 @@ def _refit(lines, xy: np.ndarray, cfg: DetectionConfig):
                 break
             pts = xy[sel]
             cx, cy, wx, wy = _principal(pts)
-            if wx * vx + wy * vy < 0:
+            flipped = wx * vx + wy * vy < 0
+            if flipped:
                 wx, wy = -wx, -wy
             s = pts @ np.array((wx, wy))
             s0 = float(s.min())
@@ -457,7 +462,13 @@ def _refit(lines, xy: np.ndarray, cfg: DetectionConfig):
                 continue
             run = sel[lo:hi]
             run_xy = xy[run]
-            chords = _chords(run_xy, cfg)
+            if hi - lo == len(s):  # one run of all the points: the fit above is theirs
+                if flipped:  # (as _principal gave it: the chord path starts at that end)
+                    chords = _chords(run_xy[::-1], cfg, (cx, cy, -vx, -vy), -(s + s0)[::-1])
+                else:
+                    chords = _chords(run_xy, cfg, (cx, cy, vx, vy), s + s0)
+            else:
+                chords = _chords(run_xy, cfg)
             if not chords:
                 continue
             # Claim only the points on the chords: those of a perpendicular face that the
