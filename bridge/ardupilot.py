@@ -1,0 +1,46 @@
+"""ArduPilot Rover facts the bridge and the simulated autopilot share (no behaviour here).
+
+Sources: ArduPilot Rover documentation (flight modes, RC input, parameters) and its
+source (`Rover/mode.h`, `RC_Channel`, `GCS_MAVLink`). Newer firmware renamed some
+parameters; `PARAM_ALIASES` lists the old and new names of each.
+"""
+
+from __future__ import annotations
+
+# Rover mode numbers (custom_mode of the heartbeat).
+MODES = {
+    "MANUAL": 0, "ACRO": 1, "STEERING": 3, "HOLD": 4, "LOITER": 5, "FOLLOW": 6,
+    "SIMPLE": 7, "DOCK": 8, "CIRCLE": 9, "AUTO": 10, "RTL": 11, "SMART_RTL": 12,
+    "GUIDED": 15, "INITIALISING": 16,
+}
+MODE_NAMES = {v: k for k, v in MODES.items()}
+
+# RC_OPTIONS bits (RC_Channels::Option).
+RC_OPTION_IGNORE_RECEIVER = 1 << 0
+RC_OPTION_IGNORE_OVERRIDES = 1 << 1  # "Ignore MAVLink Overrides"
+
+# Parameter names, old (up to 4.5) and new (4.6 and later): accept either.
+PARAM_ALIASES = {
+    "gcs_sysid": ("SYSID_MYGCS", "MAV_GCS_SYSID"),
+    "arming_check": ("ARMING_CHECK", "ARMING_SKIPCHK"),
+}
+
+OVERRIDE_RELEASE = 0  # RC_CHANNELS_OVERRIDE value that hands a channel back to the receiver
+OVERRIDE_IGNORE = 65535  # ... that leaves a channel as it is (MAVLink 1 meaning of UINT16_MAX)
+
+# Defaults of the parameters the bridge reads (ArduPilot Rover).
+DEFAULT_PARAMS = {
+    "RCMAP_ROLL": 1.0,  # steering channel
+    "RCMAP_THROTTLE": 3.0,
+    "RC_OVERRIDE_TIME": 3.0,  # s; stale overrides end after this
+    "RC_OPTIONS": 0.0,
+    "SYSID_THISMAV": 1.0,
+    "MAV_GCS_SYSID": 255.0,
+    "ARMING_SKIPCHK": 0.0,
+    **{f"RC{n}_{k}": v for n in range(1, 17)
+       for k, v in (("MIN", 1100.0), ("MAX", 1900.0), ("TRIM", 1500.0), ("DZ", 0.0),
+                    ("REVERSED", 0.0))},
+    # Rover gives steering and throttle a dead zone of 30 us by default.
+    "RC1_DZ": 30.0,
+    "RC3_DZ": 30.0,
+}
