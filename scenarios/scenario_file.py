@@ -62,6 +62,8 @@ class Scenario:
     criteria: Criteria = Criteria()
     default_test: bool = True  # short enough for the default test command
     snapshot_times_s: tuple = ()
+    geodetic_origin: tuple | None = None  # (lat_deg, lon_deg, alt_m) of the local frame's origin
+    replay_mount: tuple = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # x, y, z m (body, z down), roll, pitch, yaw rad
 
 
 # -- small typed readers that name the field -------------------------------------------------
@@ -380,9 +382,24 @@ def parse_scenario(text: str, source: str = "<string>", path: Path | None = None
     current = (cur.number("north_mps", 0.0), cur.number("east_mps", 0.0))
     cur.done()
 
+    origin = None
+    org = doc.table("origin")
+    if org is not None:
+        origin = (org.number("lat_deg", required=True, low=-90), org.number("lon_deg", required=True, low=-180),
+                  org.number("alt_m", 0.0))
+        if origin[0] > 90 or origin[1] > 180:
+            raise org.err("lat_deg" if origin[0] > 90 else "lon_deg", "out of range")
+        org.done()
+
     sens = doc.table("sensors") or _Table({}, "sensors", source)
     perception = sens.string("perception", "lidar", choices=PERCEPTIONS)
     known_range = sens.number("known_walls_range_m", 50.0, low=0, strict=True)
+    mount = sens.table("replay_mount") or _Table({}, "sensors.replay_mount", source)
+    replay_mount = (mount.number("x_m", 0.0), mount.number("y_m", 0.0), mount.number("z_m", 0.0),
+                    math.radians(mount.number("roll_deg", 0.0)),
+                    math.radians(mount.number("pitch_deg", 0.0)),
+                    math.radians(mount.number("yaw_deg", 0.0)))
+    mount.done()
     sens.done()
 
     plant = doc.table("plant") or _Table({}, "plant", source)
@@ -418,4 +435,5 @@ def parse_scenario(text: str, source: str = "<string>", path: Path | None = None
         controller=controller, controller_params=ctrl_params, d_p_m=d_p,
         controller_options=dict(options), criteria=criteria, default_test=default_test,
         snapshot_times_s=tuple(float(v) for v in snaps),
+        geodetic_origin=origin, replay_mount=replay_mount,
     )
