@@ -118,6 +118,8 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
     rows_t, rows_clear, rows_cmd, rows_xt, solve_s = [], [], [], [], []
     snapshots: list[Snapshot] = []
     status, reached = "time limit", False
+    contact = metrics.HullContact(cfg.outlines)
+    collided = False
     wall0 = time.perf_counter()
     with RunLog(out_dir / "log.csv", out_dir / "segments.csv") as log:
         imu_k = 0
@@ -153,6 +155,9 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
                 snapshots.append(Snapshot(t, out.state.copy(), decision.predicted, segs))
             if not decision.ok:
                 break
+            if min(clear) <= contact.reach_m and contact.touches(out.state):
+                status, collided = f"collision at t = {t:.1f} s", True
+                break
             for _ in range(n_imu):
                 ta = time.perf_counter()
                 out = plant.step(command, cfg.imu_period_s)
@@ -183,6 +188,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
         "seed": cfg.seed,
         "status": status,
         "reached_goal": reached,
+        "collision": collided,
         "duration_s": round(duration, 6),
         "min_clearance_m": _round(float(min_clear.min())),
         "min_clearance_bow_m": _round(float(clear[:, 0].min())) if len(clear) else None,

@@ -12,6 +12,7 @@ COMPARED = ("nmpc", "los-pid", "lexicographic")
 COLUMNS = (
     ("controller", "controller", "{}"),
     ("reached goal", "reached_goal", "{}"),
+    ("collision", "collision", "{}"),
     ("duration [s]", "duration_s", "{:.1f}"),
     ("min clearance [m]", "min_clearance_m", "{:.2f}"),
     ("time below R_b+d_p [s]", "time_below_desired_s", "{:.1f}"),

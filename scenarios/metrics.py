@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controller.geometry import Polyline, distance_to_polylines
+from controller.geometry import Polyline, distance_to_polylines, segments_cross
 
 HULL_CIRCLE_OFFSETS_M = (2.0, -2.0)
 """Centres of the two hull circles along body x (bow p_b, stern p_s), as in the paper."""
@@ -29,6 +29,46 @@ def clearance(poses, outlines, offsets=HULL_CIRCLE_OFFSETS_M) -> np.ndarray:
     centres = hull_circle_centres(poses, offsets)
     n, k = centres.shape[:2]
     return distance_to_polylines(centres.reshape(-1, 2), outlines).reshape(n, k)
+
+
+HULL_LENGTH_M, HULL_BREADTH_M = 7.9, 2.6
+"""The hull's waterline rectangle (the paper's boat), centred on the body origin."""
+
+
+class HullContact:
+    """Whether the hull rectangle touches any true outline: the run's collision test.
+
+    The outlines' segments are gathered once; a pose is checked only when a hull circle
+    centre is within the rectangle's half diagonal of an outline (the caller's clearance).
+    """
+
+    def __init__(self, outlines, length_m: float = HULL_LENGTH_M, breadth_m: float = HULL_BREADTH_M):
+        parts = [np.asarray(o, float).reshape(-1, 2) for o in outlines]
+        parts = [p for p in parts if len(p) >= 2]
+        self._a = np.vstack([p[:-1] for p in parts]) if parts else np.empty((0, 2))
+        self._b = np.vstack([p[1:] for p in parts]) if parts else np.empty((0, 2))
+        self._half = np.array([length_m / 2, breadth_m / 2])
+        self.reach_m = float(np.hypot(*self._half)) + max(abs(o) for o in HULL_CIRCLE_OFFSETS_M)
+
+    def corners(self, pose) -> np.ndarray:
+        """The rectangle's corners (4, 2) in the NED plane, bow starboard first, clockwise."""
+        hx, hy = self._half
+        local = np.array([[hx, hy], [-hx, hy], [-hx, -hy], [hx, -hy]])
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        return local @ np.array([[c, s], [-s, c]]) + np.asarray(pose[:2], float)
+
+    def touches(self, pose) -> bool:
+        """An outline crosses a hull edge, or an outline vertex lies on or inside the hull."""
+        if not len(self._a):
+            return False
+        corners = self.corners(pose)
+        edges_a, edges_b = corners, np.roll(corners, -1, axis=0)
+        if segments_cross(edges_a, edges_b, self._a, self._b).any():
+            return True
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        d = self._a - np.asarray(pose[:2], float)
+        local = np.stack([d[:, 0] * c + d[:, 1] * s, -d[:, 0] * s + d[:, 1] * c], axis=1)
+        return bool(np.any(np.all(np.abs(local) <= self._half, axis=1)))
 
 
 def time_below(values, threshold: float, dt: float) -> float:

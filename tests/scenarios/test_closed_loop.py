@@ -77,6 +77,19 @@ def test_controller_failure_stops_the_boat_and_ends_the_run(tmp_path):
     assert json.loads((tmp_path / "f" / "summary.json").read_text())["steps"] == 51
 
 
+def test_touching_a_wall_ends_the_run_as_a_collision(tmp_path):
+    class HardToStarboard:
+        name = "starboard"
+
+        def step(self, t, state, act, segs):
+            return Decision(command=np.array([60.0, -60.0]))
+
+    s = run(tmp_path / "c", controller=HardToStarboard()).summary
+    assert s["collision"] and s["status"].startswith("collision at t = ") and not s["reached_goal"]
+    assert s["min_clearance_m"] < 3.0
+    assert not run(tmp_path / "ok").summary["collision"]
+
+
 def test_plots_are_written_from_the_run_directory(tmp_path):
     from scenarios import plots
 

@@ -43,3 +43,16 @@ def test_cross_track_to_a_path():
 def test_timing_stats():
     s = metrics.TimingStats.of([0.001] * 99 + [0.01])
     assert s.max_ms == pytest.approx(10.0) and s.mean_ms == pytest.approx(1.09)
+
+
+def test_hull_contact_sees_a_wall_inside_the_hull_rectangle():
+    walls = [np.array([[-100, -6.0], [100, -6.0]]), np.array([[-100, 4.0], [100, 4.0]])]
+    contact = metrics.HullContact(walls)  # 7.9 m x 2.6 m
+    assert not contact.touches([0.0, 2.6, 0.0])  # side 0.1 m from the east wall
+    assert contact.touches([0.0, 2.8, 0.0])  # side 0.1 m across it
+    assert not contact.touches([0.0, 0.0, np.pi / 2])  # across the canal: bow 0.05 m short
+    assert contact.touches([0.0, 0.1, np.pi / 2])
+    # a pier end poking into the hull from the side crosses no hull edge only if inside it
+    pier = [np.array([[0.5, 0.5], [0.5, 20.0]])]
+    assert metrics.HullContact(pier).touches([0.0, 0.0, 0.0])
+    assert not metrics.HullContact(pier).touches([0.0, -2.0, 0.0])
