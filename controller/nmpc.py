@@ -8,8 +8,11 @@
 
 with x = [x, y, psi, u, v, r, nT, nS] and u = [dnT, dnS] (DESIGN.md, NMPC). Choices the paper
 leaves open, and why:
-- The slack may shrink the super-ellipse's minor half axis, -(R_b + d_p) + 0.1 <= s_i <= 0:
-  printed with s_i >= 0 it could only make the constraint harder and an optimiser keeps it at 0.
+- The slack may shrink the separation R_b + d_p, -(R_b + d_p) + 0.1 <= s_i <= 0: printed with
+  s_i >= 0 it could only make the constraint harder and an optimiser keeps it at 0. It shrinks
+  both half axes (DESIGN.md: the minor one only): otherwise a segment's ends keep a hard margin
+  R_b + d_p, and a short segment across the way (a wall's step where the canal narrows, a pier
+  end) made the QP infeasible wherever the canal is narrower than twice that margin.
 - The slack is carried as a ninth state, s_{i+1} = sigma_i with sigma_i a third input. Each
   stage's constraints then involve only that stage's variables, as structure-exploiting QP
   solvers (hpipm) need, and the terminal stage has its slack too.
@@ -36,6 +39,7 @@ import numpy as np
 
 from .errors import InputError
 from .model import SMOOTH, Variant, augmented_ode, rk4
+from .obstacle import super_ellipse_margin
 from .params import IDENTIFIED, PARAM_NAMES, BoatParams
 from .segment_slots import SLOT_FIELDS
 
@@ -213,10 +217,9 @@ def clearance_function(config: NmpcConfig) -> ca.Function:
     for px, py in hull_circles(x, [geometry[2], geometry[3]]):
         for j in range(config.segment_slots):
             xc, yc, th, length, active = (slots[k, j] for k in range(len(SLOT_FIELDS)))
-            dx, dy = px - xc, py - yc
-            X = (dx * ca.cos(th) + dy * ca.sin(th)) / (length / 2 + Rb + dp)
-            Y = (-dx * ca.sin(th) + dy * ca.cos(th)) / (Rb + dp + s)
-            h.append(active * ((X**4 + Y**4 + 1e-12) ** 0.25 - 1) + (1 - active))
+            margin = Rb + dp + s  # the slack softens the separation all round, ends included
+            h.append(active * super_ellipse_margin(px, py, xc, yc, th, length, margin, margin)
+                     + (1 - active))
     return ca.Function("clearance", [x, slots, geometry], [ca.vertcat(*h)],
                        ["x", "slots", "geometry"], ["h"])
 

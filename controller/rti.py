@@ -230,8 +230,8 @@ def sqp(step: QpStep, w: np.ndarray, p: np.ndarray, w_ref: np.ndarray, lbw: np.n
 
     Iterated, it backtracks along each step on an L1 merit function (full steps alone can
     cycle near active obstacle constraints), and has converged when the largest component of
-    the accepted step is below `tol`. A failed QP stops it and returns the last guess with
-    ok=False.
+    the accepted step is below `tol`. A QP failing on the first iteration returns ok=False; on a
+    later one, the last accepted iterate (ok=True, not converged, the failure in the status).
     """
     w = np.array(w, float)
     x0 = step.x0_at
@@ -245,6 +245,9 @@ def sqp(step: QpStep, w: np.ndarray, p: np.ndarray, w_ref: np.ndarray, lbw: np.n
         qp_iters += max(r.qp_iterations, 0)
         status = r.status
         if not r.ok:
+            if k > 1:  # keep the last accepted iterate: at least as good as a real-time iteration
+                return SqpResult(w, True, False, f"QP failed ({r.status}) at iteration {k}; "
+                                 f"kept iterate {k - 1}", k, qp_iters, norm, t_lin, t_qp)
             return SqpResult(w, False, False, f"QP failed ({r.status})", k, qp_iters, norm,
                              t_lin, t_qp)
         alpha = 1.0

@@ -125,7 +125,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
         imu_k = 0
         for k in range(n_steps):
             t = k * cfg.control_period_s
-            est = nav.state
+            est = nav.state if out.estimate is None else np.asarray(out.estimate, float)
             t0 = time.perf_counter()
             segs = np.asarray(perception.segments(t, out.state, est), float).reshape(-1, 4)
             t1 = time.perf_counter()

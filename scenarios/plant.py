@@ -29,6 +29,8 @@ class PlantOutput:
     state: np.ndarray  # [x, y, psi, u, v, r] true
     state_dot: np.ndarray  # time derivative of the state (body accelerations in [3:6])
     actuators: np.ndarray  # [nT, nS] after the rate limits, percent
+    estimate: np.ndarray | None = None  # the plant's own state estimate (e.g. an autopilot's
+    # EKF over MAVLink); None: the closed loop estimates the state from its simulated sensors
 
 
 class Plant(Protocol):

@@ -65,8 +65,9 @@ def test_bad_segments_are_clear_errors(segments, words):
         check_segments(segments)
 
 
-def test_clearance_is_the_papers_super_ellipse_with_the_slack_on_the_minor_axis():
-    """Sign of h equals the sign of eq. mpc:pnorm; an inactive slot gives h = 1."""
+def test_clearance_is_the_papers_super_ellipse_with_the_slack_on_both_axes():
+    """Sign of h equals the sign of eq. mpc:pnorm with the slack shrinking both half axes (so a
+    segment's ends are soft too); an inactive slot gives h = 1."""
     cfg = NmpcConfig(segment_slots=2)
     h = clearance_function(cfg)
     rng = np.random.default_rng(1)
@@ -81,7 +82,7 @@ def test_clearance_is_the_papers_super_ellipse_with_the_slack_on_the_minor_axis(
         for k, d in enumerate((2.0, -2.0)):
             px, py = x[0] + d * math.cos(x[2]), x[1] + d * math.sin(x[2])
             dx, dy = px - seg[0], py - seg[1]
-            X = (dx * math.cos(seg[2]) + dy * math.sin(seg[2])) / (seg[3] / 2 + Rb + dp)
+            X = (dx * math.cos(seg[2]) + dy * math.sin(seg[2])) / (seg[3] / 2 + Rb + dp + x[8])
             Y = (-dx * math.sin(seg[2]) + dy * math.cos(seg[2])) / (Rb + dp + x[8])
             paper = X**4 + Y**4 - 1
             if abs(paper) > 1e-6:
