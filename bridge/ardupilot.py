@@ -44,3 +44,21 @@ DEFAULT_PARAMS = {
     "RC1_DZ": 30.0,
     "RC3_DZ": 30.0,
 }
+
+# RC_CHANNELS_OVERRIDE, channels 9..18: 0 and UINT16_MAX leave a channel as it is, this value
+# hands it back to the receiver (MAVLink spec; channels 1..8 use OVERRIDE_RELEASE = 0).
+OVERRIDE_RELEASE_HIGH = 65534
+
+# MAV_CMD_COMPONENT_ARM_DISARM param2 that forces arming/disarming past the checks.
+FORCE_ARM_MAGIC = 21196
+
+# Arming-check bits (AP_Arming::Check). ARMING_CHECK (old) lists the checks to DO, with bit 0
+# meaning all of them; ARMING_SKIPCHK (new) lists the checks to SKIP (-1: skip everything).
+ARMING_CHECK_ALL = 1 << 0
+ARMING_CHECK_GPS = 1 << 3  # Rover runs its AHRS/position-estimate check with the GPS checks
+
+# Defaults of the old names: ARMING_CHECK = 1 does every check.
+LEGACY_DEFAULTS = {"SYSID_MYGCS": 255.0, "ARMING_CHECK": 1.0}
+
+# ArduPilot SITL's default home (CMAC, Canberra): lat deg, lon deg, alt m.
+SITL_DEFAULT_HOME = (-35.363261, 149.165230, 584.0)

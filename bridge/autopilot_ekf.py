@@ -1,0 +1,98 @@
+"""The simulated autopilot's navigation estimate: truth plus bounded, seeded, coloured noise.
+
+Not a filter: each error is a first-order Gauss-Markov process (a random walk pulled back to
+zero with time constant `tau`, stationary standard deviation `sigma`, clipped at 3 sigma),
+which is what an EKF's error looks like to its user: slowly wandering position, small
+heading error, velocity noise. The estimate is not ready (attitude only) until `delay_s`
+after boot, like an EKF waiting for GPS. The same seed and the same steps give the same
+numbers.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+EARTH_RADIUS_M = 6378137.0  # WGS-84 equatorial radius, flat-earth conversion about the origin
+
+
+@dataclass(frozen=True)
+class NoiseSpec:
+    """Standard deviation and time constant of each error (SI units)."""
+
+    pos_sigma_m: float = 0.2
+    pos_tau_s: float = 20.0
+    heading_sigma_rad: float = math.radians(0.3)
+    heading_tau_s: float = 10.0
+    vel_sigma_mps: float = 0.05
+    vel_tau_s: float = 1.0
+    rate_sigma_radps: float = math.radians(0.2)
+    rate_tau_s: float = 0.2
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """What the autopilot believes: NED position and velocity over ground, heading, yaw rate."""
+
+    north_m: float
+    east_m: float
+    vn_mps: float
+    ve_mps: float
+    psi_rad: float  # wrapped to (-pi, pi]
+    r_radps: float
+
+
+def wrap_pi(a: float) -> float:
+    """Angle to (-pi, pi]."""
+    w = math.remainder(a, 2 * math.pi)
+    return math.pi if w == -math.pi else w
+
+
+def ned_to_geodetic(north_m: float, east_m: float, origin) -> tuple[float, float]:
+    """Flat-earth offset from `origin` (lat_deg, lon_deg, ...) to latitude, longitude degrees."""
+    lat0, lon0 = origin[0], origin[1]
+    lat = lat0 + math.degrees(north_m / EARTH_RADIUS_M)
+    lon = lon0 + math.degrees(east_m / (EARTH_RADIUS_M * math.cos(math.radians(lat0))))
+    return lat, lon
+
+
+class EkfModel:
+    """Errors for [north, east, psi, vn, ve, r], advanced with the physics."""
+
+    def __init__(self, seed: int, delay_s: float, spec: NoiseSpec = NoiseSpec()):
+        self.delay_s = float(delay_s)
+        self.spec = spec
+        self._rng = np.random.default_rng(seed)
+        s = spec
+        self._sigma = np.array([s.pos_sigma_m, s.pos_sigma_m, s.heading_sigma_rad,
+                                s.vel_sigma_mps, s.vel_sigma_mps, s.rate_sigma_radps])
+        self._tau = np.array([s.pos_tau_s, s.pos_tau_s, s.heading_tau_s,
+                              s.vel_tau_s, s.vel_tau_s, s.rate_tau_s])
+        self._err = np.clip(self._rng.standard_normal(6), -3, 3) * self._sigma
+        self._dt = None
+        self._a = self._b = None
+
+    def step(self, dt: float) -> None:
+        """Advance every error by `dt` seconds (exact discretisation of the Gauss-Markov law)."""
+        if dt != self._dt:
+            self._dt = dt
+            self._a = np.exp(-dt / self._tau)
+            self._b = self._sigma * np.sqrt(1.0 - self._a ** 2)
+        e = self._a * self._err + self._b * self._rng.standard_normal(6)
+        self._err = np.clip(e, -3 * self._sigma, 3 * self._sigma)
+
+    def ready(self, since_boot_s: float) -> bool:
+        return since_boot_s >= self.delay_s
+
+    def estimate(self, state) -> Estimate:
+        """Truth [x, y, psi, u, v, r] plus the current errors; velocity rotated to NED."""
+        x, y, psi, u, v, r = (float(s) for s in state)
+        c, s = math.cos(psi), math.sin(psi)
+        e = self._err
+        return Estimate(
+            north_m=x + e[0], east_m=y + e[1],
+            vn_mps=c * u - s * v + e[3], ve_mps=s * u + c * v + e[4],
+            psi_rad=wrap_pi(psi + e[2]), r_radps=r + e[5],
+        )

@@ -1,0 +1,86 @@
+"""`canalnav autopilot-sim`: a simulated ArduPilot Rover (boat) on MAVLink, the FMU as physics."""
+
+from __future__ import annotations
+
+import sys
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "autopilot-sim", help="simulated ArduPilot Rover (boat) speaking MAVLink 2, FMU physics",
+        description="Serve a simulated ArduPilot Rover (boat frame) on a MAVLink connection: "
+        "heartbeat, parameters, arming, modes, RC overrides, EKF-style state streams, with the "
+        "boat FMU started from the scenario's initial state. Boots disarmed in MANUAL; the "
+        "position estimate is ready --ekf-delay seconds after boot.",
+    )
+    p.add_argument("--listen", required=True, metavar="URL",
+                   help="pymavlink connection string, e.g. udpin:127.0.0.1:14550 (the bridge "
+                   "then connects with udpout:127.0.0.1:14550) or tcpin:127.0.0.1:5760")
+    p.add_argument("--scenario", required=True, metavar="FILE", help="scenario file (TOML)")
+    p.add_argument("--speedup", type=float, default=1.0, metavar="K",
+                   help="run K times faster than real time (default 1)")
+    p.add_argument("--seed", type=int, default=None, metavar="N",
+                   help="EKF noise seed (default: the scenario's)")
+    p.add_argument("--signing-key", metavar="FILE",
+                   help="MAVLink 2 signing key file: 32 raw bytes, 64 hex characters, or a "
+                   "passphrase (its SHA-256); unsigned messages are then ignored")
+    p.add_argument("--ekf-delay", type=float, default=20.0, metavar="S",
+                   help="seconds after boot before the position estimate is ready (default 20)")
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                   help="set an autopilot parameter at boot (repeatable), e.g. RC1_MIN=1000")
+    p.add_argument("--duration", type=float, default=None, metavar="S",
+                   help="stop after S simulated seconds (default: until Ctrl-C)")
+    p.add_argument("--legacy-param-names", action="store_true",
+                   help="use the parameter names of ArduPilot 4.5 (SYSID_MYGCS, ARMING_CHECK)")
+    p.add_argument("--system-id", type=int, default=1, metavar="N",
+                   help="the autopilot's MAVLink system id (default 1)")
+    p.set_defaults(func=run)
+
+
+def parse_params(items: list[str]) -> dict[str, float]:
+    """NAME=VALUE strings to a dict; InputError names the bad item."""
+    from controller.errors import InputError
+
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        name = name.strip().upper()
+        if not sep or not name:
+            raise InputError(f"--param {item!r}: expected NAME=VALUE")
+        try:
+            out[name] = float(value)
+        except ValueError:
+            raise InputError(f"--param {item!r}: {value.strip()!r} is not a number") from None
+    return out
+
+
+def run(args) -> int:
+    from controller.errors import InputError
+    from scenarios.scenario_file import load_scenario
+
+    from bridge.autopilot_sim import AutopilotSim
+    from bridge.clock import RealClock
+    from bridge.signing import load_signing_key
+
+    if not args.speedup > 0:
+        raise InputError(f"--speedup must be positive, got {args.speedup}")
+    if args.ekf_delay < 0:
+        raise InputError(f"--ekf-delay must be >= 0, got {args.ekf_delay}")
+    scenario = load_scenario(args.scenario)
+    key = load_signing_key(args.signing_key) if args.signing_key else None
+    params = parse_params(args.param)
+    seed = scenario.seed if args.seed is None else args.seed
+    clock = RealClock(args.speedup)
+    sim = AutopilotSim(scenario, args.listen, clock, seed=seed, signing_key=key, params=params,
+                       ekf_delay_s=args.ekf_delay, legacy_param_names=args.legacy_param_names,
+                       system_id=args.system_id)
+    try:
+        print(f"autopilot-sim: ArduPilot Rover (simulated), system {args.system_id}, listening "
+              f"on {args.listen}, scenario {scenario.name}, {args.speedup:g}x real time"
+              f"{', signed' if key else ''}", flush=True)
+        sim.serve(args.duration)
+    except KeyboardInterrupt:
+        print("autopilot-sim: stopped", file=sys.stderr)
+    finally:
+        sim.close()
+    return 0
