@@ -21,7 +21,7 @@ import numpy as np
 from controller.geometry import Polyline
 from controller.navigation import NavigationFilter
 from scenarios import metrics
-from scenarios.plant import Plant, PlantOutput
+from scenarios.plant import Plant, PlantFailure, PlantOutput
 from scenarios.run_log import RunLog
 from scenarios.sensors import AhrsConfig, AhrsSensor, GpsConfig, GpsSensor
 
@@ -158,19 +158,23 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
             if min(clear) <= contact.reach_m and contact.touches(out.state):
                 status, collided = f"collision at t = {t:.1f} s", True
                 break
-            for _ in range(n_imu):
-                ta = time.perf_counter()
-                out = plant.step(command, cfg.imu_period_s)
-                tb = time.perf_counter()
-                sample = ahrs.measure(out.state, out.state_dot)
-                nav.predict(cfg.imu_period_s, sample.accel_body)
-                nav.update_ahrs(sample.heading_rad, sample.yaw_rate_radps)
-                imu_k += 1
-                if imu_k % gps_every == 0:
-                    fix = gps.measure(out.state)
-                    nav.update_gps(fix.position_ne, fix.velocity_ne)
-                timer.add("plant", tb - ta)
-                timer.add("navigation", time.perf_counter() - tb)
+            try:
+                for _ in range(n_imu):
+                    ta = time.perf_counter()
+                    out = plant.step(command, cfg.imu_period_s)
+                    tb = time.perf_counter()
+                    sample = ahrs.measure(out.state, out.state_dot)
+                    nav.predict(cfg.imu_period_s, sample.accel_body)
+                    nav.update_ahrs(sample.heading_rad, sample.yaw_rate_radps)
+                    imu_k += 1
+                    if imu_k % gps_every == 0:
+                        fix = gps.measure(out.state)
+                        nav.update_gps(fix.position_ne, fix.velocity_ne)
+                    timer.add("plant", tb - ta)
+                    timer.add("navigation", time.perf_counter() - tb)
+            except PlantFailure as exc:  # e.g. a lost MAVLink link: what was logged stays
+                status = f"plant failed: {exc}"
+                break
             if np.hypot(*(out.state[:2] - goal)) <= cfg.goal_radius_m:
                 status, reached = "reached goal", True
                 break

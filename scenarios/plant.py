@@ -12,7 +12,12 @@ from typing import Protocol
 
 import numpy as np
 
+from controller.errors import CanalnavError
 from controller.params import BoatParams
+
+
+class PlantFailure(CanalnavError):
+    """The plant cannot go on (e.g. its MAVLink link is lost): the run ends with this reason."""
 
 
 @dataclass(frozen=True)
