@@ -17,6 +17,9 @@ What is simulated, as ArduPilot Rover does it:
   and velocity; LOCAL_POSITION_NED and GLOBAL_POSITION_INT are sent only once the position
   is valid. The local NED origin is the scenario's origin (`geodetic_origin`, else ArduPilot
   SITL's default home).
+- TIMESYNC requests are answered; the legacy REQUEST_DATA_STREAM sets a group's rate
+  (EXTENDED_STATUS: SYS_STATUS; RC_CHANNELS: RC_CHANNELS, SERVO_OUTPUT_RAW; POSITION:
+  GLOBAL_POSITION_INT, LOCAL_POSITION_NED; EXTRA1: ATTITUDE; EXTRA3: EKF_STATUS_REPORT).
 - Signing: with a key, unsigned or badly signed messages are dropped (except RADIO_STATUS
   and RADIO, as ArduPilot), and everything sent is signed.
 
@@ -105,7 +108,8 @@ class LinkCounters:
     """What arrived and what was dropped (tests and diagnostics)."""
 
     messages: int = 0
-    bad_data: int = 0  # garbage, bad CRC, bad or missing signature
+    bad_data: int = 0  # garbage, bad CRC, cut-short frames
+    rejected_signature: int = 0  # unsigned or badly signed while signing is on
     bad_fields: int = 0  # well-formed messages whose fields made no sense (NaN, ...)
     overrides_ignored: int = 0  # RC_CHANNELS_OVERRIDE not obeyed (sysid, target, RC_OPTIONS)
 
@@ -368,7 +372,10 @@ class AutopilotSim:
     def _handle(self, msg) -> None:
         kind = msg.get_type()
         if kind == "BAD_DATA":
-            self.counters.bad_data += 1
+            if "signature" in str(getattr(msg, "reason", "")).lower():
+                self.counters.rejected_signature += 1
+            else:
+                self.counters.bad_data += 1
             return
         self.counters.messages += 1
         handler = self._HANDLERS.get(kind)
@@ -400,6 +407,23 @@ class AutopilotSim:
         values = [getattr(msg, f"chan{i}_raw", 0) for i in range(1, 19)]
         self._rc.apply(values, self.boot_s, ignore)
         self._outputs = self._compute_outputs()
+
+    def _on_timesync(self, msg) -> None:
+        """Answer a TIMESYNC request (tc1 = 0) with our clock in ns, echoing ts1, as ArduPilot."""
+        if msg.tc1 == 0:
+            self._conn.mav.timesync_send(int(self.boot_s * 1e9) + 1, msg.ts1)
+
+    def _on_request_data_stream(self, msg) -> None:
+        """The legacy REQUEST_DATA_STREAM: a group of streams at one rate (0 or stop: off)."""
+        if not self._for_us(msg):
+            return
+        ids = st.DATA_STREAM_GROUPS.get(msg.req_stream_id, ())
+        if msg.req_stream_id == 0:  # MAV_DATA_STREAM_ALL
+            ids = [i for group in st.DATA_STREAM_GROUPS.values() for i in group]
+        rate = float(msg.req_message_rate)
+        interval_us = 1e6 / rate if msg.start_stop and rate > 0 else -1
+        for msg_id in ids:
+            self._streams.set_interval_us(msg_id, interval_us, self.boot_s)
 
     def _on_set_mode(self, msg) -> None:
         if msg.target_system != self._sysid:
@@ -667,6 +691,8 @@ class AutopilotSim:
         "STATUSTEXT": _on_statustext,
         "RC_CHANNELS_OVERRIDE": _on_override,
         "SET_MODE": _on_set_mode,
+        "TIMESYNC": _on_timesync,
+        "REQUEST_DATA_STREAM": _on_request_data_stream,
         "PARAM_REQUEST_READ": _on_param_read,
         "PARAM_REQUEST_LIST": _on_param_list,
         "PARAM_SET": _on_param_set,

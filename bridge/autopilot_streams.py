@@ -29,6 +29,15 @@ DEFAULT_INTERVALS: dict[int, float | None] = {
     SERVO_OUTPUT_RAW: None,
 }
 
+# MAV_DATA_STREAM groups of the legacy REQUEST_DATA_STREAM, as ArduPilot fills them.
+DATA_STREAM_GROUPS: dict[int, tuple[int, ...]] = {
+    2: (SYS_STATUS,),  # EXTENDED_STATUS
+    3: (RC_CHANNELS, SERVO_OUTPUT_RAW),  # RC_CHANNELS
+    6: (GLOBAL_POSITION_INT, LOCAL_POSITION_NED),  # POSITION
+    10: (ATTITUDE,),  # EXTRA1
+    12: (EKF_STATUS_REPORT,),  # EXTRA3
+}
+
 
 class Streams:
     """Interval and next due time of each stream."""

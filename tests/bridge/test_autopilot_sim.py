@@ -221,6 +221,24 @@ def test_set_message_interval_acks_and_rates(make_rig):
     assert not any(m.get_type() == "RC_CHANNELS" for m in rig.run(1.0))
 
 
+def test_request_message_timesync_and_legacy_data_streams(make_rig):
+    rig = make_rig(legacy_param_names=True)
+    rig.client.inbox.clear()
+    assert rig.command(512, 148).result == ACCEPTED  # REQUEST_MESSAGE AUTOPILOT_VERSION
+    rig.run(0.05)
+    version = next(m for m in rig.client.inbox if m.get_type() == "AUTOPILOT_VERSION")
+    assert version.flight_sw_version >> 16 == 0x0405  # legacy names: ArduPilot 4.5
+    assert rig.command(512, ID_GPS_RAW_INT).result == DENIED
+    rig.client.mav.timesync_send(0, 123456789)
+    ts = rig.wait("TIMESYNC", lambda m: m.ts1 == 123456789)
+    assert ts.tc1 > 0
+    rig.client.mav.request_data_stream_send(1, 1, 3, 10, 1)  # RC_CHANNELS group at 10 Hz
+    rig.client.mav.request_data_stream_send(1, 1, 10, 0, 0)  # EXTRA1 (ATTITUDE) off
+    got = rig.run(1.0)
+    assert 8 <= sum(m.get_type() == "SERVO_OUTPUT_RAW" for m in got) <= 12
+    assert not any(m.get_type() == "ATTITUDE" for m in got)
+
+
 def test_arming_waits_for_the_ekf(make_rig):
     rig = make_rig(ekf_delay_s=1.0)
     ekf = rig.wait("EKF_STATUS_REPORT")
@@ -367,7 +385,7 @@ def test_signing_accepts_signed_and_ignores_unsigned(make_rig):
         c.mav.param_set_send(1, 1, b"RC_OVERRIDE_TIME", 9.0, 9)
     rig.run(0.2)
     assert rig.sim.params["RC_OVERRIDE_TIME"] == 3.0
-    assert rig.sim.counters.bad_data >= 2
+    assert rig.sim.counters.rejected_signature >= 2
     assert rig.set_param("RC_OVERRIDE_TIME", 7.0).param_value == 7.0
 
 
