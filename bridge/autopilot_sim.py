@@ -9,7 +9,9 @@ What is simulated, as ArduPilot Rover does it:
   INTERVAL, REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAPABILITIES, PREFLIGHT_REBOOT_SHUTDOWN
   (param1 = 1, refused while armed); any other command is MAV_RESULT_UNSUPPORTED. The SET_MODE
   message is answered with a COMMAND_ACK for command 11, as ArduPilot does.
-- RC_CHANNELS_OVERRIDE from the GCS sysid only (see `autopilot_rc`), RC_OPTIONS, RC_OVERRIDE_TIME.
+- RC_CHANNELS_OVERRIDE addressed to our system id from the GCS sysid (MAV_GCS_SYSID /
+  SYSID_MYGCS) only, per-channel release/ignore values, RC_OPTIONS, RC_OVERRIDE_TIME
+  (see `autopilot_rc`). Any other message is answered whoever sends it, as ArduPilot does.
 - Streams (defaults in `autopilot_streams.DEFAULT_INTERVALS`): HEARTBEAT, SYS_STATUS and
   EKF_STATUS_REPORT at 1 Hz; ATTITUDE, LOCAL_POSITION_NED, GLOBAL_POSITION_INT at 4 Hz;
   RC_CHANNELS and SERVO_OUTPUT_RAW off. A reboot forgets requested rates.
@@ -245,7 +247,9 @@ class AutopilotSim:
 
     # -- the loop -------------------------------------------------------------------------
     def pump(self, now: float) -> None:
-        """Handle everything received, advance the physics to `now`, send what is due."""
+        """Handle everything received, advance the physics to `now`, send what is due.
+
+        `now` is clock time; the physics' time 0 is the clock's time at construction."""
         if self._conn is None:
             return
         self._receive_all()
