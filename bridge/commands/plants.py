@@ -1,0 +1,10 @@
+"""Adds `bridge`'s plants to `canalnav run --plant` (scenarios never imports bridge)."""
+
+
+def register(subparsers) -> None:
+    """No subcommand of its own: registers `mavlink-sim` in the scenario runner's PLANTS."""
+    from scenarios.runner import PLANTS
+
+    from bridge.mavlink_plant import mavlink_sim_plant
+
+    PLANTS.setdefault("mavlink-sim", mavlink_sim_plant)
