@@ -15,7 +15,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-EARTH_RADIUS_M = 6378137.0  # WGS-84 equatorial radius, flat-earth conversion about the origin
 
 
 @dataclass(frozen=True)
@@ -48,14 +47,6 @@ def wrap_pi(a: float) -> float:
     """Angle to (-pi, pi]."""
     w = math.remainder(a, 2 * math.pi)
     return math.pi if w == -math.pi else w
-
-
-def ned_to_geodetic(north_m: float, east_m: float, origin) -> tuple[float, float]:
-    """Flat-earth offset from `origin` (lat_deg, lon_deg, ...) to latitude, longitude degrees."""
-    lat0, lon0 = origin[0], origin[1]
-    lat = lat0 + math.degrees(north_m / EARTH_RADIUS_M)
-    lon = lon0 + math.degrees(east_m / (EARTH_RADIUS_M * math.cos(math.radians(lat0))))
-    return lat, lon
 
 
 class EkfModel:

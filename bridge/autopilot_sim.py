@@ -57,7 +57,8 @@ from controller.errors import InputError
 
 from . import ardupilot
 from . import autopilot_streams as st
-from .autopilot_ekf import EkfModel, ned_to_geodetic
+from .autopilot_ekf import EkfModel
+from .ekf_state import ned_to_geodetic  # one flat-earth conversion, both ends of the link
 from .autopilot_params import ParamTable, param_id
 from .autopilot_rc import UINT16_MAX, RcInput
 from .rc_mapping import RcMapping
