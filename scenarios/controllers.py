@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from controller.baselines.los_pid import LosPidConfig, LosPidTracker
+from controller.geometry import Polyline
 from controller.params import BoatParams
 from scenarios.closed_loop import Decision
 
@@ -81,6 +82,9 @@ class PlannedLosPid:
     Baseline 1 (after Villa et al. 2020, as the paper used it): the planner is the NMPC
     itself, iterated to convergence (SQP) since it plans once a second. Baseline 2: the
     lexicographic planner of the paper's Appendix. The tracker never sees the segments.
+    The tracked path is the plan followed by the waypoints beyond its end (our choice): a
+    plan kept while the planner finds none runs out, and LOS at the end of a path would
+    turn the boat around; after the plan, the waypoints are what the boat has to go by.
     """
 
     def __init__(self, name: str, planner, params, waypoints, target_speed_mps: float,
@@ -89,6 +93,7 @@ class PlannedLosPid:
         self._plan = planner  # (state, actuators, segments) -> (path (K, 2), ok, status, predicted)
         self._tracker = LosPidTracker(params, LosPidConfig(target_speed_mps=target_speed_mps))
         self._tracker.set_path(waypoints)
+        self._waypoints = Polyline(waypoints)
         self._every = max(1, int(round(replan_period_s / control_period_s)))
         self._dt = control_period_s
         self._k = 0
@@ -102,12 +107,21 @@ class PlannedLosPid:
             path, ok, status, predicted = self._plan(state, actuators, segments)
             self._status = status
             if ok and len(path) >= 2:
-                self._tracker.set_path(path, state)
+                self._tracker.set_path(self._then_waypoints(path), state)
                 self._predicted = predicted
         self._k += 1
         command = self._tracker.step(state, self._dt)
         return Decision(command=command, status=self._status, predicted=self._predicted,
                         segments_used=segments)
+
+
+    def _then_waypoints(self, path) -> np.ndarray:
+        """The plan, then the waypoints that lie beyond its end along the waypoint path."""
+        wp = self._waypoints
+        s_start = wp.project(path[0])[0]
+        s_end = wp.project(path[-1], s_min=s_start)[0]
+        rest = wp.points[1:][wp.cumulative[1:] > s_end + 1.0]
+        return np.vstack([np.asarray(path, float).reshape(-1, 2), rest])
 
 
 def nmpc_planned_los_pid(scenario) -> PlannedLosPid:
