@@ -1,0 +1,401 @@
+"""The onboard loop: the NMPC driving an ArduPilot Rover boat over MAVLink at 10 Hz.
+
+`prepare_link` takes a connected `AutopilotLink` from "heard nothing" to "ready to steer":
+heartbeat, message rates, RC parameters, pre-flight refusals, a usable EKF position, and the
+mode and arming only when asked. `OnboardLoop.run` then closes the loop on the link's clock:
+the EKF state predicted over the link delay, segments from the LiDAR source, the controller,
+RC overrides out. On a lost link, a stale state, a controller failure, an error or Ctrl-C it
+fails safe: neutral commands, overrides released, HOLD if it controls the mode, and the
+reason on the console and to the ground station. `run_bridge` wires it all from options.
+
+Exit codes: 0 goal reached; 1 stopped (time limit, failsafe); 3 pre-flight refused; 130 Ctrl-C.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from controller.errors import CanalnavError, InputError
+
+from bridge.step_log import Step, StepLog, status_line
+
+EXIT_GOAL, EXIT_STOPPED, EXIT_REFUSED, EXIT_INTERRUPTED = 0, 1, 3, 130
+MAV_SEVERITY_CRITICAL, MAV_SEVERITY_WARNING, MAV_SEVERITY_INFO = 2, 4, 6
+
+
+class PreflightRefused(CanalnavError):
+    """The autopilot would not obey (or must not be driven); `reasons` says why, each naming
+    the parameter and its value."""
+
+    def __init__(self, reasons: list[str]):
+        self.reasons = list(reasons)
+        super().__init__("pre-flight checks refused: " + "; ".join(self.reasons))
+
+
+@dataclass(frozen=True)
+class BridgeOptions:
+    """Everything `canalnav bridge` takes (SI units, seconds)."""
+
+    connect: str = ""
+    scenario: str | Path | None = None
+    lidar: str = "sim"
+    arm: bool = False
+    mode: str | None = None
+    signing_key: str | Path | None = None
+    duration_s: float | None = None
+    resume: bool = False
+    log_dir: str | Path | None = None
+    system_id: int = 255
+    component_id: int = 191
+    target_system: int | None = None
+    link_timeout_s: float = 3.0
+    stale_s: float = 1.0
+    speedup: float = 1.0
+    ekf_timeout_s: float = 120.0
+    heartbeat_timeout_s: float = 30.0
+    stream_rate_hz: float = 20.0
+    control_period_s: float = 0.1
+    seed: int | None = None  # simulated LiDAR noise (default: the scenario's seed)
+    safe_repeats: int = 3  # neutral and release are each sent this often, 50 ms apart
+
+
+@dataclass
+class Preparation:
+    """What `prepare_link` found: the autopilot's heartbeat, the parameters read, notes."""
+
+    heartbeat: object
+    params: dict
+    streams: dict
+    notes: list = field(default_factory=list)
+
+
+@dataclass
+class BridgeResult:
+    exit_code: int
+    reason: str
+    steps: int = 0
+    reached_goal: bool = False
+    failsafes: list = field(default_factory=list)
+
+
+def _say(console, text: str) -> None:
+    if console is not None:
+        console.write(text + "\n")
+        console.flush()
+
+
+def prepare_link(link, scenario, options: BridgeOptions = BridgeOptions(), console=None) -> Preparation:
+    """Heartbeat, stream rates, RC parameters, pre-flight checks, EKF position, then the mode
+    and arming if asked. Raises PreflightRefused (with reasons) or LinkError (no answer)."""
+    from bridge import preflight
+    from bridge.rc_mapping import RcMapping
+
+    link.geodetic_origin = scenario.geodetic_origin
+    hb = link.wait_heartbeat(options.heartbeat_timeout_s)
+    _say(console, f"autopilot: system {hb.system_id} component {hb.component_id}, "
+                  f"{'boat' if hb.type == preflight.MAV_TYPE_SURFACE_BOAT else 'rover'}, "
+                  f"{hb.mode}, {'armed' if hb.armed else 'disarmed'}")
+    streams = link.request_streams(options.stream_rate_hz)
+    unanswered = [k for k, v in streams.items() if v != 0]
+    if unanswered:
+        _say(console, "note: SET_MESSAGE_INTERVAL not accepted for " + ", ".join(
+            f"{k} ({'no answer' if streams[k] is None else f'result {streams[k]}'})" for k in unanswered))
+    params = link.fetch_params(preflight.BASE_PARAMS + preflight.GCS_SYSID_NAMES,
+                               optional=(preflight.GCS_SYSID_HIGH,))
+    params.update(link.fetch_params(preflight.channel_params(params)))
+    reasons = preflight.refusals(link.heartbeat, params, system_id=link.system_id,
+                                 requested_mode=options.mode)
+    if reasons:
+        raise PreflightRefused(reasons)
+    link.rc_mapping = RcMapping.from_params(params)
+    notes = preflight.notes(link.heartbeat, params, arm=options.arm, requested_mode=options.mode)
+    for note in notes:
+        _say(console, f"note: {note}")
+    m = link.rc_mapping
+    _say(console, f"RC: throttle channel {m.throttle.channel} ({m.throttle.min:g}/{m.throttle.trim:g}/"
+                  f"{m.throttle.max:g} us), steering channel {m.steering.channel} "
+                  f"({m.steering.min:g}/{m.steering.trim:g}/{m.steering.max:g} us)")
+    link.wait_position_ok(options.ekf_timeout_s)
+    _say(console, "EKF: horizontal position usable")
+    if options.mode and link.heartbeat.mode != options.mode.upper():
+        link.set_mode(options.mode)
+        _say(console, f"mode set to {options.mode.upper()}")
+    if options.arm and not link.heartbeat.armed:
+        link.arm()
+        _say(console, "armed")
+    return Preparation(link.heartbeat, params, streams, notes)
+
+
+def nearest_segment_m(position, segments) -> float:
+    """Distance from a point to the nearest segment (x_c, y_c, theta, length); inf if none."""
+    from controller.geometry import point_segment_distance, segments_to_endpoints
+
+    segs = np.asarray(segments, float).reshape(-1, 4)
+    if not len(segs):
+        return math.inf
+    a, b = segments_to_endpoints(segs)
+    return float(point_segment_distance(np.asarray(position, float)[:2], a, b).min())
+
+
+class OnboardLoop:
+    """The control loop on an injected link, controller and LiDAR source (see module doc).
+
+    Everything waits on `link.clock`, so with a VirtualClock and a simulated autopilot as its
+    peer the whole run is deterministic in one thread.
+    """
+
+    def __init__(self, link, scenario, controller, lidar, options: BridgeOptions = BridgeOptions(),
+                 console=sys.stderr, log: StepLog | None = None):
+        self.link = link
+        self.clock = link.clock
+        self.scenario = scenario
+        self.controller = controller
+        self.lidar = lidar
+        self.options = options
+        self.console = console
+        self.log = log or StepLog(None)
+        self.steps = 0
+        self.failsafes: list[str] = []
+        self._t0 = 0.0
+        self._actuators = np.zeros(2)
+        self._tty = bool(getattr(console, "isatty", lambda: False)())
+        self._status_shown = False
+
+    # -- the run ---------------------------------------------------------------------------
+    def run(self) -> BridgeResult:
+        try:
+            prepare_link(self.link, self.scenario, self.options, self.console)
+        except PreflightRefused as exc:
+            self._say("bridge: refused to start:\n  - " + "\n  - ".join(exc.reasons))
+            return BridgeResult(EXIT_REFUSED, str(exc))
+        self._t0 = self.clock.now()
+        try:
+            return self._loop()
+        except KeyboardInterrupt:
+            self._fail_safe("interrupted (Ctrl-C)")
+            return self._result(EXIT_INTERRUPTED, "interrupted (Ctrl-C)")
+        except Exception as exc:
+            try:
+                self._fail_safe(f"bridge error: {exc}")
+            except Exception:  # noqa: BLE001 - the original error matters more
+                pass
+            raise
+
+    def _loop(self) -> BridgeResult:
+        period = self.options.control_period_s
+        goal = np.asarray(self.scenario.waypoints, float)[-1]
+        next_t = self.clock.now()
+        while True:
+            self.link.pump()
+            t = self.clock.now() - self._t0
+            if self.options.duration_s is not None and t >= self.options.duration_s:
+                self._stop("time limit", MAV_SEVERITY_WARNING)
+                return self._result(EXIT_STOPPED, "time limit")
+            fault = self._fault()
+            if fault is None:
+                state = self.link.state
+                if np.hypot(state.x - goal[0], state.y - goal[1]) <= self.scenario.goal_radius_m:
+                    self._stop("reached the goal", MAV_SEVERITY_INFO)
+                    return self._result(EXIT_GOAL, "reached the goal", reached=True)
+                fault = self._step(t)
+            if fault is not None:
+                self._fail_safe(fault)
+                if not self.options.resume:
+                    return self._result(EXIT_STOPPED, fault)
+                stopped = self._recover()
+                if stopped is not None:
+                    return stopped
+                next_t = self.clock.now()
+                continue
+            next_t += period
+            wait = next_t - self.clock.now()
+            if wait > 1e-9:
+                self.clock.sleep(wait)
+            else:
+                next_t = self.clock.now()
+
+    def _fault(self) -> str | None:
+        link = self.link
+        if not link.alive:
+            return f"link lost: no message from the autopilot for {link.silence_s:.1f} s"
+        if not link.state_fresh:
+            return f"state stale: the newest EKF state is {link.state_age_s:.1f} s old"
+        if not link.horizontal_position_ok:
+            flags = link.ekf_flags
+            return f"EKF position not usable (flags {'none' if flags is None else hex(flags)})"
+        return None
+
+    def _step(self, t: float) -> str | None:
+        """One control period; returns a fault that calls for the failsafe, else None."""
+        from bridge.ekf_state import predict_vector
+        from bridge.lidar_source import segments as detect
+
+        link = self.link
+        state = link.state
+        age, delay = link.state_age_s, link.link_delay_s
+        pred = predict_vector(state.vector, age + delay)
+        segs = detect(self.lidar.scan(t, pred), pred)
+        t0 = time.perf_counter()
+        decision = self.controller.step(t, pred, self._actuators.copy(), segs)
+        solve_ms = (time.perf_counter() - t0) * 1e3
+        hb = link.heartbeat
+        if not decision.ok:
+            return f"controller failed: {decision.status}"
+        command = np.clip(np.asarray(decision.command, float).reshape(2), -100.0, 100.0)
+        if not np.all(np.isfinite(command)):
+            return f"controller failed: command {command.tolist()} is not a number"
+        pwm = link.send_commands(*command)
+        self._actuators = command
+        m = link.rc_mapping
+        step = Step(t, state.time_boot_s, age, delay, state.vector, pred, command,
+                    (pwm.get(m.throttle.channel), pwm.get(m.steering.channel)), segs,
+                    nearest_segment_m(pred, segs), solve_ms, float(decision.slack_m),
+                    hb.mode, hb.armed, str(decision.status))
+        self.log.step(step)
+        self.steps += 1
+        self._show(step)
+        return None
+
+    # -- stopping ------------------------------------------------------------------------------
+    def _pause(self, seconds: float) -> None:
+        self.clock.sleep(seconds)
+        self.link.pump()
+
+    def _stop(self, reason: str, severity: int) -> None:
+        """Neutral, release, HOLD (if the mode is ours), then tell the ground station."""
+        link = self.link
+        if link.rc_mapping is not None:
+            for _ in range(self.options.safe_repeats):
+                link.send_neutral()
+                self._pause(0.05)
+            for _ in range(self.options.safe_repeats):
+                link.release()
+                self._pause(0.05)
+        held = ""
+        if self.options.mode:
+            try:
+                link.set_mode("HOLD", timeout_s=0.5, retries=2)
+                held = ", HOLD"
+            except CanalnavError as exc:
+                held = f", HOLD failed ({exc})"
+        link.statustext(f"canalnav: {reason}", severity)
+        self._actuators = np.zeros(2)
+        t = self.clock.now() - self._t0
+        hb = link.heartbeat
+        self.log.event(t, reason, hb.mode if hb else "", hb.armed if hb else None)
+        self._say(f"bridge: {reason}: neutral sent, overrides released{held}")
+
+    def _fail_safe(self, reason: str) -> None:
+        self.failsafes.append(reason)
+        self._stop(f"FAILSAFE {reason}", MAV_SEVERITY_CRITICAL)
+
+    def _recover(self) -> BridgeResult | None:
+        """--resume: wait for the link and state to come back, prepare again, continue.
+        Returns a result if the run must end instead (time limit, refusal)."""
+        from bridge.link import LinkError
+
+        self._say("bridge: waiting for the link and the EKF state to come back (--resume)")
+        while True:
+            remaining = math.inf
+            if self.options.duration_s is not None:
+                remaining = self.options.duration_s - (self.clock.now() - self._t0)
+                if remaining <= 0:
+                    return self._result(EXIT_STOPPED, "time limit (waiting to resume)")
+            if not self.link.wait_until(lambda: self.link.alive, min(1.0, remaining)):
+                continue
+            try:
+                options = self.options
+                if remaining < options.ekf_timeout_s:
+                    from dataclasses import replace
+
+                    options = replace(options, ekf_timeout_s=max(remaining, 0.1))
+                prepare_link(self.link, self.scenario, options, self.console)
+            except PreflightRefused as exc:
+                self._say("bridge: cannot resume:\n  - " + "\n  - ".join(exc.reasons))
+                return self._result(EXIT_REFUSED, str(exc))
+            except LinkError as exc:
+                self._say(f"bridge: not yet: {exc}")
+                continue
+            reset = getattr(self.controller, "reset", None) or getattr(
+                getattr(self.controller, "core", None), "reset", None)
+            if reset is not None:
+                reset()
+            self._actuators = np.zeros(2)
+            self.link.statustext("canalnav: resumed control", MAV_SEVERITY_WARNING)
+            self.log.event(self.clock.now() - self._t0, "resumed")
+            self._say("bridge: resumed")
+            return None
+
+    def _result(self, code: int, reason: str, reached: bool = False) -> BridgeResult:
+        return BridgeResult(code, reason, self.steps, reached, list(self.failsafes))
+
+    # -- console -------------------------------------------------------------------------------
+    def _show(self, step: Step) -> None:
+        if self.console is None:
+            return
+        if self._tty:
+            self.console.write("\r" + status_line(step) + "\x1b[K")
+            self.console.flush()
+            self._status_shown = True
+        elif self.steps % 50 == 1:
+            self._say(status_line(step))
+
+    def _say(self, text: str) -> None:
+        if self._status_shown:
+            text = "\n" + text
+            self._status_shown = False
+        _say(self.console, text)
+
+
+def run_bridge(options: BridgeOptions, console=sys.stderr) -> BridgeResult:
+    """`canalnav bridge`: load the scenario, build the controller and LiDAR source, connect,
+    prepare, run; the link and logs are closed whatever happens."""
+    from bridge.ardupilot import MODES
+    from bridge.clock import RealClock
+    from bridge.lidar_source import make_lidar_source
+    from bridge.link import AutopilotLink
+    from scenarios.controllers import NmpcController
+    from scenarios.scenario_file import load_scenario
+
+    if options.scenario is None or not options.connect:
+        raise InputError("bridge: --connect URL and --scenario FILE are required")
+    if options.mode is not None and options.mode.upper() not in MODES:
+        raise InputError(f"--mode {options.mode}: not a Rover mode (one of {', '.join(MODES)})")
+    for name, value in (("--duration", options.duration_s), ("--speedup", options.speedup),
+                        ("--ekf-timeout", options.ekf_timeout_s)):
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise InputError(f"{name} must be a positive number, got {value!r}")
+    scenario = load_scenario(options.scenario)
+    key = None
+    if options.signing_key is not None:
+        from bridge.signing import load_signing_key
+
+        key = load_signing_key(options.signing_key)
+    lidar = make_lidar_source(options.lidar, scenario, options.seed)
+    log_dir = None if options.log_dir is None else Path(options.log_dir)
+    if log_dir is not None:
+        log_dir.mkdir(parents=True, exist_ok=True)
+    link = AutopilotLink(  # opened before the controller is built: a bad URL fails at once
+        options.connect, RealClock(options.speedup), system_id=options.system_id,
+        component_id=options.component_id, target_system=options.target_system,
+        signing_key=key, tlog_path=None if log_dir is None else log_dir / "mavlink.tlog",
+        link_timeout_s=options.link_timeout_s, stale_s=options.stale_s,
+        geodetic_origin=scenario.geodetic_origin)
+    log = None
+    try:
+        controller = NmpcController(scenario)
+        _say(console, f"bridge: sending as system id {options.system_id}, component "
+                      f"{options.component_id}: ArduPilot obeys RC overrides only from its GCS "
+                      "id (SYSID_MYGCS / MAV_GCS_SYSID)" + (", signed" if key else ""))
+        log = StepLog(log_dir)
+        return OnboardLoop(link, scenario, controller, lidar, options, console, log).run()
+    finally:
+        if log is not None:
+            log.close()
+        link.close()

@@ -1,0 +1,113 @@
+"""The bridge's per-step CSV log and its one-line console status, written as the run goes.
+
+`steps.csv` has a row per control step (time, reported and predicted state, commands, PWM
+sent, delays, status) and a row per event (failsafe, resume, goal) with the state columns
+empty; `segments.csv` the segments each step used. Both are flushed after every row, so a
+crash or a pulled plug loses nothing before it.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+STATE = ("x_m", "y_m", "psi_rad", "u_mps", "v_mps", "r_radps")
+STEP_COLUMNS = (
+    ("time_s", "ekf_time_s", "state_age_s", "link_delay_s")
+    + STATE + tuple(f"pred_{n}" for n in STATE)
+    + ("nT_cmd_pct", "nS_cmd_pct", "throttle_pwm_us", "steering_pwm_us", "segments",
+       "nearest_segment_m", "solve_ms", "slack_m", "mode", "armed", "status")
+)
+SEGMENT_COLUMNS = ("time_s", "x_c_m", "y_c_m", "theta_rad", "length_m")
+
+
+@dataclass
+class Step:
+    """What one control step saw and did."""
+
+    time_s: float
+    ekf_time_s: float
+    state_age_s: float
+    link_delay_s: float
+    state: np.ndarray
+    predicted: np.ndarray
+    command: np.ndarray
+    pwm: tuple[int | None, int | None]  # throttle, steering
+    segments: np.ndarray
+    nearest_segment_m: float
+    solve_ms: float
+    slack_m: float
+    mode: str
+    armed: bool
+    status: str
+
+
+class StepLog:
+    """steps.csv and segments.csv in a folder (or nowhere with `folder=None`)."""
+
+    def __init__(self, folder: Path | None):
+        self._files = []
+        if folder is None:
+            self._w = self._sw = None
+            return
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        fh = (folder / "steps.csv").open("w", newline="")
+        sfh = (folder / "segments.csv").open("w", newline="")
+        self._files = [fh, sfh]
+        self._w, self._sw = csv.writer(fh), csv.writer(sfh)
+        self._w.writerow(STEP_COLUMNS)
+        self._sw.writerow(SEGMENT_COLUMNS)
+        self._flush()
+
+    def step(self, s: Step) -> None:
+        if self._w is None:
+            return
+        nums = [s.time_s, s.ekf_time_s, s.state_age_s, s.link_delay_s, *s.state, *s.predicted,
+                *s.command]
+        row = [_num(v) for v in nums]
+        row += ["" if p is None else int(p) for p in s.pwm]
+        row += [len(s.segments), _num(s.nearest_segment_m), f"{s.solve_ms:.3f}", _num(s.slack_m),
+                s.mode, int(s.armed), s.status]
+        self._w.writerow(row)
+        for seg in np.asarray(s.segments, float).reshape(-1, 4):
+            self._sw.writerow([_num(s.time_s), *(_num(v) for v in seg)])
+        self._flush()
+
+    def event(self, time_s: float, status: str, mode: str = "", armed: bool | None = None) -> None:
+        if self._w is None:
+            return
+        row = [""] * len(STEP_COLUMNS)
+        row[0] = _num(time_s)
+        row[-3], row[-2], row[-1] = mode, "" if armed is None else int(armed), status
+        self._w.writerow(row)
+        self._flush()
+
+    def _flush(self) -> None:
+        for fh in self._files:
+            fh.flush()
+
+    def close(self) -> None:
+        for fh in self._files:
+            fh.close()
+        self._files = []
+        self._w = self._sw = None
+
+
+def _num(v) -> str:
+    v = float(v)
+    return repr(v) if math.isfinite(v) else ""
+
+
+def status_line(s: Step) -> str:
+    """One console line: time, mode, arming, position, speed, commands, nearest wall, delay."""
+    x, y, psi, u, v, _ = s.state
+    near = f"{s.nearest_segment_m:5.1f} m" if math.isfinite(s.nearest_segment_m) else "  --   "
+    return (f"t {s.time_s:7.1f} s  {s.mode:<8} {'ARMED' if s.armed else 'disarmed':<8} "
+            f"x {x:8.1f} y {y:8.1f} hdg {math.degrees(psi) % 360:5.1f}  {math.hypot(u, v):4.2f} m/s  "
+            f"nT {s.command[0]:6.1f} nS {s.command[1]:6.1f} %  wall {near}  "
+            f"delay {s.link_delay_s * 1e3:4.0f} ms  {s.status}")

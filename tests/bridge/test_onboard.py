@@ -1,0 +1,343 @@
+"""The onboard loop against the scripted fake autopilot, in lock-step: goal, refusals, failsafes.
+
+Each failsafe must reach the autopilot as neutral commands, then released overrides, then
+HOLD (only when the bridge controls the mode), then a STATUSTEXT saying why, in that order.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import re
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bridge.ardupilot import MODES
+from bridge.link import AutopilotLink, LinkError
+from bridge.main import main
+from bridge.onboard import (EXIT_GOAL, EXIT_INTERRUPTED, EXIT_REFUSED, EXIT_STOPPED,
+                            BridgeOptions, OnboardLoop, nearest_segment_m, prepare_link)
+from bridge.step_log import STEP_COLUMNS, StepLog
+from scenarios.closed_loop import Decision
+from scenarios.scenario_file import load_scenario
+
+from pymavlink import mavutil
+
+ROOT = Path(__file__).resolve().parents[2]
+STRAIGHT = ROOT / "scenarios" / "straight.toml"
+HOLD = MODES["HOLD"]
+
+
+@pytest.fixture(scope="module")
+def scenario():
+    s = load_scenario(STRAIGHT)
+    return replace(s, waypoints=np.array([[0.0, 0.0], [30.0, 0.0]]))
+
+
+class StubController:
+    """Constant commands; fails, interrupts or raises at a given call when told to."""
+
+    name = "stub"
+
+    def __init__(self, command=(30.0, 10.0), fail_at=None, interrupt_at=None, raise_at=None):
+        self.command = command
+        self.fail_at, self.interrupt_at, self.raise_at = fail_at, interrupt_at, raise_at
+        self.calls = []
+        self.resets = 0
+
+    def step(self, time_s, state, actuators, segments):
+        self.calls.append((time_s, np.array(state), np.array(actuators), len(segments)))
+        k = len(self.calls)
+        if k == self.interrupt_at:
+            raise KeyboardInterrupt
+        if k == self.raise_at:
+            raise RuntimeError("boom")
+        if k == self.fail_at:
+            return Decision(command=np.zeros(2), ok=False, status="QP infeasible")
+        return Decision(command=np.array(self.command, float))
+
+    def reset(self):
+        self.resets += 1
+
+
+class NoLidar:
+    def scan(self, time_s, pose):
+        return None
+
+
+OPTIONS = BridgeOptions(heartbeat_timeout_s=5.0, ekf_timeout_s=5.0)
+
+
+def run_loop(ap, clock, scenario, controller, log_dir=None, lidar=None, at=None, **options):
+    """Run the loop; `at` = {time_s: action(ap)} applied by a clock peer."""
+    link_kwargs = {k: options.pop(k) for k in ("link_timeout_s", "stale_s") if k in options}
+    pending = dict(sorted((at or {}).items()))
+
+    def script(now):
+        for t in [t for t in pending if now >= t]:
+            pending.pop(t)(ap)
+
+    clock.add_peer(script)
+    link = AutopilotLink(ap.url, clock, tlog_path=None if log_dir is None else log_dir / "mavlink.tlog",
+                         **link_kwargs)
+    console = io.StringIO()
+    log = StepLog(log_dir)
+    loop = OnboardLoop(link, scenario, controller, lidar or NoLidar(), replace(OPTIONS, **options),
+                       console=console, log=log)
+    try:
+        result = loop.run()
+    finally:
+        log.close()
+        link.close()
+        clock.sleep(0.05)  # the autopilot reads what was sent last
+    return result, console.getvalue()
+
+
+def events(ap, since=0.0):
+    """What the autopilot received from `since` on, as a compressed list of safety events."""
+    out = []
+    for t, msg in ap.received:
+        if t < since:
+            continue
+        kind = msg.get_type()
+        if kind == "RC_CHANNELS_OVERRIDE":
+            ch = [getattr(msg, f"chan{i}_raw") for i in range(1, 9)]
+            e = "release" if ch == [0] * 8 else "neutral" if (ch[0], ch[2]) == (1500, 1500) else "drive"
+        elif kind == "COMMAND_LONG" and msg.command == mavutil.mavlink.MAV_CMD_DO_SET_MODE:
+            e = f"mode {int(msg.param2)}"
+        elif kind == "COMMAND_LONG" and msg.command == mavutil.mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
+            e = "arm"
+        elif kind == "STATUSTEXT":
+            if msg.chunk_seq > 0 and out and out[-1].startswith("text: "):
+                out[-1] += msg.text  # a long text comes in chunks
+                continue
+            e = f"text: {msg.text}"
+        else:
+            continue
+        if not out or out[-1] != e:
+            out.append(e)
+    return out
+
+
+def read_steps(log_dir):
+    with open(log_dir / "steps.csv") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_runs_to_the_goal_and_exits_0(make_autopilot, vclock, scenario, tmp_path):
+    ap = make_autopilot(state=(0.0, 1.0, 0.0, 4.0, 0.0, 0.0))
+    ctrl = StubController(command=(30.0, 10.0))
+    result, console = run_loop(ap, vclock, scenario, ctrl, log_dir=tmp_path)
+    assert result.exit_code == EXIT_GOAL and result.reached_goal and result.reason == "reached the goal"
+    # 25 m at 4 m/s, 10 Hz
+    assert 60 <= result.steps <= 66
+    # commands at the autopilot: nT 30 on ch3 above trim, nS 10 (port) on ch1 below trim
+    drive = [o for o in ap.overrides() if o[2] not in (0, 1500)]
+    assert drive[0][:8] == [1433, 65535, 1641, 65535, 65535, 65535, 65535, 65535]
+    assert len(drive) == result.steps
+    # never arms or changes mode unless asked; the end: neutral, release, then the word
+    assert events(ap) == ["drive", "neutral", "release", "text: canalnav: reached the goal"]
+    # the controller sees the state predicted over age + delay: ahead of the reported one
+    t, state, actuators, _ = ctrl.calls[5]
+    assert actuators.tolist() == [30.0, 10.0] and ctrl.calls[0][2].tolist() == [0.0, 0.0]
+    rows = read_steps(tmp_path)
+    steps = [r for r in rows if r["x_m"]]
+    assert len(steps) == result.steps and list(rows[0]) == list(STEP_COLUMNS)
+    r = steps[5]
+    assert float(r["pred_x_m"]) > float(r["x_m"])
+    dt = float(r["state_age_s"]) + float(r["link_delay_s"])
+    assert float(r["pred_x_m"]) - float(r["x_m"]) == pytest.approx(4.0 * dt, abs=1e-6)
+    assert (int(r["throttle_pwm_us"]), int(r["steering_pwm_us"])) == (1641, 1433)
+    assert r["mode"] == "MANUAL" and r["armed"] == "0" and 0 < float(r["link_delay_s"]) < 0.05
+    assert rows[-1]["status"] == "reached the goal"
+    assert (tmp_path / "mavlink.tlog").stat().st_size > 1000
+    assert "autopilot: system 1 component 1, boat, MANUAL, disarmed" in console
+    assert "note: the autopilot is disarmed and --arm was not given" in console
+
+
+def test_mode_and_arm_when_asked_and_hold_at_the_goal(make_autopilot, vclock, scenario):
+    ap = make_autopilot(mode="HOLD", armed=False, state=(0.0, 0.0, 0.0, 5.0, 0.0, 0.0))
+    result, console = run_loop(ap, vclock, scenario, StubController(), mode="MANUAL", arm=True)
+    assert result.exit_code == EXIT_GOAL
+    ev = events(ap)
+    assert ev[:3] == [f"mode {MODES['MANUAL']}", "arm", "drive"]
+    assert ev[3:] == ["neutral", "release", f"mode {HOLD}", "text: canalnav: reached the goal"]
+    assert ap.mode_name == "HOLD" and ap.armed
+    assert "mode set to MANUAL" in console and "armed" in console
+
+
+def test_preflight_refusal_exits_3_and_sends_nothing(make_autopilot, vclock, scenario):
+    ap = make_autopilot(params={"RC_OPTIONS": 2, "MAV_GCS_SYSID": 250}, mode="HOLD")
+    ctrl = StubController()
+    result, console = run_loop(ap, vclock, scenario, ctrl, arm=True)
+    assert result.exit_code == EXIT_REFUSED and not ctrl.calls
+    assert "RC_OPTIONS = 2 has bit 1" in console and "MAV_GCS_SYSID = 250" in console
+    assert "HEARTBEAT.custom_mode = 4 (HOLD)" in console
+    assert ap.overrides() == [] and events(ap) == []  # no arming, no overrides
+
+
+FAILSAFES = {
+    # name: (controller, script, loop options, expected reason start, exit code)
+    "link lost": (dict(), {1.0: lambda ap: setattr(ap, "mute", True)},
+                  dict(link_timeout_s=0.5), "link lost: no message from the autopilot", EXIT_STOPPED),
+    "state stale": (dict(), {1.0: lambda ap: setattr(ap, "send_state", False)},
+                    dict(), "state stale: the newest EKF state is", EXIT_STOPPED),
+    "controller failure": (dict(fail_at=10), {}, dict(), "controller failed: QP infeasible",
+                           EXIT_STOPPED),
+    "ctrl-c": (dict(interrupt_at=10), {}, dict(), "interrupted (Ctrl-C)", EXIT_INTERRUPTED),
+    "ekf position lost": (dict(), {1.0: lambda ap: setattr(ap, "ekf_flags", 1 | 2 | 512)}, dict(),
+                          "EKF position not usable (flags 0x203)", EXIT_STOPPED),
+}
+
+
+@pytest.mark.parametrize("name", list(FAILSAFES))
+@pytest.mark.parametrize("mode", [None, "MANUAL"])
+def test_failsafe_neutral_release_hold_statustext_in_order(make_autopilot, vclock, scenario,
+                                                           tmp_path, name, mode):
+    ctrl_kwargs, script, opts, reason, code = FAILSAFES[name]
+    ap = make_autopilot(state=(0.0, 0.0, 0.0, 1.0, 0.0, 0.0))
+    result, console = run_loop(ap, vclock, scenario, StubController(**ctrl_kwargs), log_dir=tmp_path,
+                               at=script, mode=mode, **opts)
+    assert result.exit_code == code and result.reason.startswith(reason)
+    assert result.failsafes == [result.reason]
+    hold = [f"mode {HOLD}"] if mode else []
+    ev = events(ap)
+    assert ev[ev.index("drive"):] == ["drive", "neutral", "release", *hold,
+                                      f"text: canalnav: FAILSAFE {result.reason}"]
+    assert f"bridge: FAILSAFE {result.reason}: neutral sent, overrides released" in console
+    if mode and name == "link lost":
+        assert "HOLD failed (no answer to mode HOLD" in console  # sent, but no ACK came back
+    rows = read_steps(tmp_path)
+    assert rows[-1]["status"] == f"FAILSAFE {result.reason}"
+    assert len([r for r in rows if r["x_m"]]) == result.steps >= 5
+
+
+def test_error_inside_the_loop_fails_safe_then_raises(make_autopilot, vclock, scenario):
+    ap = make_autopilot()
+    with pytest.raises(RuntimeError, match="boom"):
+        run_loop(ap, vclock, scenario, StubController(raise_at=3))
+    assert events(ap) == ["drive", "neutral", "release", "text: canalnav: FAILSAFE bridge error: boom"]
+
+
+def test_time_limit(make_autopilot, vclock, scenario):
+    ap = make_autopilot(state=(0.0, 0.0, 0.0, 0.5, 0.0, 0.0))
+    result, _ = run_loop(ap, vclock, scenario, StubController(), duration_s=2.0)
+    assert result.exit_code == EXIT_STOPPED and result.reason == "time limit"
+    assert result.steps == 20
+    assert events(ap)[-3:] == ["neutral", "release", "text: canalnav: time limit"]
+
+
+def test_resume_after_the_link_comes_back(make_autopilot, vclock, scenario, tmp_path):
+    ap = make_autopilot(state=(0.0, 0.0, 0.0, 2.0, 0.0, 0.0))
+    ctrl = StubController()
+    cut = {1.0: lambda ap: setattr(ap, "mute", True), 5.0: lambda ap: setattr(ap, "mute", False)}
+    result, console = run_loop(ap, vclock, scenario, ctrl, log_dir=tmp_path, at=cut, mode="MANUAL",
+                               resume=True)
+    assert result.exit_code == EXIT_GOAL
+    assert len(result.failsafes) == 1 and result.failsafes[0].startswith("state stale")
+    assert ctrl.resets == 1
+    ev = events(ap)
+    i = ev.index("release")
+    assert ev[i - 2:i + 5] == ["drive", "neutral", "release", f"mode {HOLD}",
+                               f"text: canalnav: FAILSAFE {result.failsafes[0]}",
+                               f"mode {MODES['MANUAL']}", "text: canalnav: resumed control"]
+    assert ev[i + 5] == "drive"
+    assert "waiting for the link and the EKF state to come back (--resume)" in console
+    assert "bridge: resumed" in console
+    statuses = [r["status"] for r in read_steps(tmp_path) if not r["x_m"]]
+    assert statuses == [f"FAILSAFE {result.failsafes[0]}", "resumed", "reached the goal"]
+
+
+def test_resume_after_an_autopilot_restart(make_autopilot, vclock, scenario):
+    ap = make_autopilot(state=(0.0, 0.0, 0.0, 2.0, 0.0, 0.0))
+
+    def reboot(ap):
+        ap.restart()  # forgets the message rates: the state goes stale until re-requested
+        ap.armed = False
+
+    result, _ = run_loop(ap, vclock, scenario, StubController(), at={3.0: reboot}, arm=True,
+                         resume=True)
+    assert result.exit_code == EXIT_GOAL and len(result.failsafes) == 1
+    assert events(ap).count("arm") == 2  # armed again, as asked at the start
+    assert len([m for m in ap.messages("COMMAND_LONG") if m.command == 511]) == 8  # rates twice
+
+
+def test_no_resume_without_the_option_even_if_the_link_returns(make_autopilot, vclock, scenario):
+    ap = make_autopilot()
+    cut = {1.0: lambda ap: setattr(ap, "mute", True), 3.0: lambda ap: setattr(ap, "mute", False)}
+    result, _ = run_loop(ap, vclock, scenario, StubController(), at=cut)
+    assert result.exit_code == EXIT_STOPPED and "drive" not in events(ap)[-3:]
+
+
+def test_waits_for_the_ekf_then_drives(make_autopilot, vclock, scenario):
+    ap = make_autopilot(ekf_flags=1 | 2 | 512)  # predicted position only
+    result, _ = run_loop(ap, vclock, scenario, StubController(), duration_s=0.5,
+                         at={3.0: lambda ap: setattr(ap, "ekf_flags", 1 | 2 | 16)})
+    assert result.exit_code == EXIT_STOPPED and result.steps == 5
+    first_drive = next(t for t, m in ap.received if m.get_type() == "RC_CHANNELS_OVERRIDE")
+    assert first_drive >= 3.0
+
+
+def test_ekf_timeout_is_a_link_error(make_autopilot, vclock, scenario):
+    ap = make_autopilot(ekf_flags=0)
+    with pytest.raises(LinkError, match=r"no usable horizontal position from the EKF within 5 s \(EKF_STATUS_REPORT flags: 0x0000"):
+        run_loop(ap, vclock, scenario, StubController())
+    assert ap.overrides() == []
+
+
+def test_prepare_link_for_a_plant(make_autopilot, vclock, scenario):
+    """The MAVLink plant reuses prepare_link on its own link."""
+    ap = make_autopilot(params={"RCMAP_ROLL": 2, "RCMAP_THROTTLE": 4, "MAV_GCS_SYSID": 200})
+    link = AutopilotLink(ap.url, vclock, system_id=200)
+    prep = prepare_link(link, scenario, replace(OPTIONS, system_id=200))
+    assert (link.rc_mapping.steering.channel, link.rc_mapping.throttle.channel) == (2, 4)
+    assert prep.params["SYSID_MYGCS"] == 200 and prep.streams["ATTITUDE"] == 0
+    assert link.state is not None and link.horizontal_position_ok
+    link.close()
+
+
+def test_real_nmpc_and_simulated_lidar_for_a_few_steps(make_autopilot, vclock, tmp_path):
+    from bridge.lidar_source import SimLidarSource
+    from scenarios.controllers import NmpcController
+
+    scenario = load_scenario(STRAIGHT)
+    ap = make_autopilot(state=tuple(scenario.initial_state))
+    result, console = run_loop(ap, vclock, scenario, NmpcController(scenario), log_dir=tmp_path,
+                               lidar=SimLidarSource(scenario), duration_s=1.0)
+    assert result.exit_code == EXIT_STOPPED and result.steps == 10
+    rows = [r for r in read_steps(tmp_path) if r["x_m"]]
+    assert all(int(r["segments"]) >= 2 for r in rows)  # both canal walls
+    # the canal is 20 m wide around y = 0 and the boat starts at y = 2: the wall is 8 m away
+    assert all(float(r["nearest_segment_m"]) == pytest.approx(8.0, abs=0.3) for r in rows)
+    nT = [float(r["nT_cmd_pct"]) for r in rows]
+    assert all(math.isfinite(v) for v in nT) and nT[-1] > 0
+    # a status line every 50 steps when the console is not a terminal
+    assert re.search(r"t +0\.0 s  MANUAL +disarmed x +0\.\d y +2\.0 hdg +0\.0 .* wall +8\.0 m", console)
+
+
+def test_nearest_segment():
+    segs = np.array([[0.0, 10.0, 0.0, 20.0], [50.0, -3.0, math.pi / 2, 2.0]])
+    assert nearest_segment_m((0.0, 0.0), segs) == pytest.approx(10.0)
+    assert nearest_segment_m((50.0, 0.0), segs) == pytest.approx(2.0)
+    assert nearest_segment_m((0.0, 0.0), np.zeros((0, 4))) == math.inf
+
+
+def test_cli_bad_input_is_one_clear_line(capsys, tmp_path):
+    base = ["bridge", "--scenario", str(STRAIGHT)]
+    assert main(base + ["--connect", "udpin:nonsense"]) == 2
+    assert "cannot open the MAVLink connection 'udpin:nonsense'" in capsys.readouterr().err
+    assert main(base + ["--connect", "udpout:127.0.0.1:9", "--signing-key",
+                        str(tmp_path / "none.key")]) == 2
+    assert "no such signing key file" in capsys.readouterr().err
+    assert main(base + ["--connect", "udpout:127.0.0.1:9", "--lidar", "camera"]) == 2
+    assert "expected 'sim' or 'replay:DIR'" in capsys.readouterr().err
+    assert main(base + ["--connect", "udpout:127.0.0.1:9", "--mode", "FLY"]) == 2
+    assert "--mode FLY: not a Rover mode" in capsys.readouterr().err
+    assert main(base + ["--connect", "udpout:127.0.0.1:9", "--duration", "-1"]) == 2
+    assert "--duration must be a positive number" in capsys.readouterr().err
+    assert main(["bridge", "--connect", "udpout:127.0.0.1:9", "--scenario", "nope.toml"]) == 2
+    assert "no such scenario file" in capsys.readouterr().err
