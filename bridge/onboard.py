@@ -123,7 +123,7 @@ def prepare_link(link, scenario, options: BridgeOptions = BridgeOptions(), conso
                   f"({m.steering.min:g}/{m.steering.trim:g}/{m.steering.max:g} us)")
     link.wait_position_ok(options.ekf_timeout_s)
     _say(console, "EKF: horizontal position usable")
-    if options.mode and link.heartbeat.mode != options.mode.upper():
+    if options.mode:  # always: the heartbeat (1 Hz) may not show our own HOLD yet
         link.set_mode(options.mode)
         _say(console, f"mode set to {options.mode.upper()}")
     if options.arm and not link.heartbeat.armed:
@@ -221,14 +221,15 @@ class OnboardLoop:
                 next_t = self.clock.now()
 
     def _fault(self) -> str | None:
+        """Why the loop must not steer now (short: it goes to the ground station), or None."""
         link = self.link
         if not link.alive:
-            return f"link lost: no message from the autopilot for {link.silence_s:.1f} s"
+            return f"link lost ({link.silence_s:.1f} s silent)"
         if not link.state_fresh:
-            return f"state stale: the newest EKF state is {link.state_age_s:.1f} s old"
+            return f"state stale ({link.state_age_s:.1f} s old)"
         if not link.horizontal_position_ok:
             flags = link.ekf_flags
-            return f"EKF position not usable (flags {'none' if flags is None else hex(flags)})"
+            return f"EKF position unusable (flags {'none' if flags is None else hex(flags)})"
         return None
 
     def _step(self, t: float) -> str | None:
