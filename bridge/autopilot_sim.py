@@ -62,6 +62,7 @@ from .ekf_state import ned_to_geodetic  # one flat-earth conversion, both ends o
 from .autopilot_params import ParamTable, param_id
 from .autopilot_rc import UINT16_MAX, RcInput
 from .rc_mapping import RcMapping
+from .signing import rejected_for_signature
 
 COMPONENT_ID = 1  # MAV_COMP_ID_AUTOPILOT1
 PARAMS_PER_PUMP = 20  # PARAM_REQUEST_LIST answers are spread over pumps, as ArduPilot's queue
@@ -377,7 +378,7 @@ class AutopilotSim:
     def _handle(self, msg) -> None:
         kind = msg.get_type()
         if kind == "BAD_DATA":
-            if "signature" in str(getattr(msg, "reason", "")).lower():
+            if rejected_for_signature(msg):
                 self.counters.rejected_signature += 1
             else:
                 self.counters.bad_data += 1

@@ -27,6 +27,7 @@ from pathlib import Path
 from controller.errors import CanalnavError, InputError
 
 from bridge.ardupilot import MODE_NAMES, MODES, OVERRIDE_IGNORE, OVERRIDE_RELEASE
+from bridge.signing import rejected_for_signature
 from bridge.ekf_state import (EkfState, horizontal_position_ok, state_from_global,
                               state_from_local)
 
@@ -204,7 +205,7 @@ class AutopilotLink:
     def _handle(self, msg) -> int:
         kind = msg.get_type()
         if kind == "BAD_DATA":
-            if "signature" in str(getattr(msg, "reason", "")).lower():
+            if rejected_for_signature(msg):
                 self.counters.rejected_signature += 1
             else:
                 self.counters.bad_data += 1

@@ -45,3 +45,8 @@ def load_signing_key(path: str | Path) -> bytes:
     except OSError as exc:
         raise InputError(f"{path}: cannot read the signing key file: {exc.strerror}") from None
     return key_from_bytes(data, str(path))
+
+
+def rejected_for_signature(bad_data_msg) -> bool:
+    """Whether pymavlink's BAD_DATA stands for a missing or wrong signature (not garbage)."""
+    return "signature" in str(getattr(bad_data_msg, "reason", "")).lower()
