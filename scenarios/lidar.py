@@ -25,7 +25,6 @@ does not roll or pitch.
 from __future__ import annotations
 
 import math
-import sys
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -359,15 +358,10 @@ class LidarSimulator:
         """One merged scan at pose (x, y, psi): (N, 3) float32 (as LiDAR drivers deliver),
         body frame, z down, origin at the boat's origin on the waterline. (Column-major:
         `np.ascontiguousarray` gives row-major points if a consumer needs them.)"""
-        return self._scan(pose, speed_mps, labels=False).points
+        return self.scan_labelled(pose, speed_mps).points
 
     def scan_labelled(self, pose, speed_mps: float = 0.0) -> LidarScan:
         """One merged scan with what each point hit (for tests, figures and benchmarks)."""
-        return self._scan(pose, speed_mps, labels=True)
-
-    def _scan(self, pose, speed_mps: float, labels: bool) -> LidarScan:
-        """The scan; without `labels`, the same points (the same draws) with labels and
-        sensors left None, sparing their gathers (all that `scan` returns is the points)."""
         pose = np.asarray(pose, float).reshape(-1)
         if pose.shape != (3,) or not np.all(np.isfinite(pose)):
             raise InputError(f"lidar: pose must be three finite numbers (x, y, psi), got {pose}")
@@ -376,14 +370,11 @@ class LidarSimulator:
         origins = self.sensor_positions(pose)
         spray = self._spray(speed_mps)
         n_spray = len(spray[1])
-        columns, label, sensor = self._render(*self._cast(origins, psi, reach), n_spray=n_spray,
-                                              labels=labels)
+        columns, labels, sensor = self._render(*self._cast(origins, psi, reach), n_spray=n_spray)
         if n_spray:
             columns[:, -n_spray:] = spray[0].T
         # (N, 3) view of the (3, N) buffer: no copy, and each coordinate is contiguous.
-        if not labels:
-            return LidarScan(columns.T, None, None)
-        return LidarScan(columns.T, np.concatenate([label, spray[1]]),
+        return LidarScan(columns.T, np.concatenate([labels, spray[1]]),
                          np.concatenate([sensor, spray[2]]))
 
     # -- rendering ----------------------------------------------------------------------
@@ -454,14 +445,13 @@ class LidarSimulator:
         t_in, e_in = nearest(c == 2)
         obst = np.where(e_in >= 0, owner[e_in], -1)
         t_out, _ = nearest((c == 2) & (owner[e] == obst[gbin]), floor=t_in)
-        if self._obstacles and (obst >= 0).any():  # (no bin crosses one: nothing to move)
+        if self._obstacles:
             inside = np.array([ob.contains(origins) for ob in self._obstacles])  # (O, S)
             in_bin = (obst >= 0) & inside[np.maximum(obst, 0), self._bin_sensor]
             t_in, t_out = np.where(in_bin, 0.0, t_in), np.where(in_bin, t_in, t_out)
         return t_face, wall_h, t_back, back_h, t_in, t_out, obst
 
-    def _render(self, t_face, wall_h, t_back, back_h, t_in, t_out, owner, n_spray=0,
-                labels=True):
+    def _render(self, t_face, wall_h, t_back, back_h, t_in, t_out, owner, n_spray=0):
         """Every beam of every sensor at once: which surface its elevation meets first.
 
         Along one column the surfaces are met in a fixed order of elevation: water below
@@ -517,7 +507,8 @@ class LidarSimulator:
         cuts = np.searchsorted(idx, self._beam_start)
         for k, (lo, hi) in enumerate(zip(cuts, np.r_[cuts[1:], n])):
             pts[:, lo:hi] += self.sensors[k].origin_body[:, None]
-        water = np.flatnonzero(lab == WATER)  # (class 0 is the label WATER)
+        label = np.where(lab == 5, np.int8(OBSTACLE), lab)  # classes 0-3 are the labels
+        water = np.flatnonzero(label == WATER)
         if len(water):
             pts[2, water] -= rng.uniform(-1.0, 1.0, len(water)).astype(f32) * f32(
                 noise.water_ripple_m)
@@ -527,9 +518,6 @@ class LidarSimulator:
         beams.hull_points.take(hull_keep, axis=1, out=hull)
         hull += beams.hull_unit.take(hull_keep, axis=1) * (
             self._normal(m) * f32(noise.range_sigma_m))
-        if not labels:
-            return out, None, None
-        label = np.where(lab == 5, np.int8(OBSTACLE), lab)  # classes 0-3 are the labels
         return (out,
                 np.concatenate([label, np.full(m, HULL, np.int8)]),
                 np.concatenate([beams.sensor[idx], beams.hull_sensor[hull_keep]]))
@@ -585,12 +573,7 @@ class LidarSimulator:
     def _uniform16(self, n: int) -> np.ndarray:
         """n uniform 16-bit draws (compare with `_level16`): cheaper than float draws, and
         probabilities resolved to 1/65536."""
-        if sys.byteorder != "little":
-            return np.frombuffer(self.rng.bytes(2 * n), np.uint16)
-        # Generator.bytes(2 n) is these uint32 draws as little-endian bytes (at least one,
-        # as its C arithmetic gives for n = 0), copied three times: the same draws, no copies.
-        words = (2 * n - 1) // 4 + 1 if n > 0 else 1
-        return self.rng.integers(0, 4294967296, size=words, dtype=np.uint32).view(np.uint16)[:n]
+        return np.frombuffer(self.rng.bytes(2 * n), np.uint16)
 
     def _normal(self, n: int) -> np.ndarray:
         """n standard normal draws (float32): a window at a random offset into a table

@@ -296,21 +296,3 @@ def test_scan_rows_are_points_whatever_the_memory_layout():
     assert len(pts) == len(scan.labels) == len(scan.sensor)
     c = np.ascontiguousarray(pts)
     assert np.array_equal(c, pts) and np.array_equal(c[:, 2], pts[:, 2])
-
-
-@pytest.mark.parametrize("n", [0, 1, 2, 3, 5, 8, 4097])
-def test_uniform16_draws_are_generator_bytes(n):
-    """The 16-bit draws are `Generator.bytes(2 n)` (the same numbers, the same generator
-    state after), without its copies."""
-    sim = LidarSimulator(straight(), seed=4)
-    ref = np.random.default_rng(99)
-    sim.rng = np.random.default_rng(99)
-    assert np.array_equal(sim._uniform16(n), np.frombuffer(ref.bytes(2 * n), np.uint16))
-    assert sim.rng.integers(0, 2**20, 4).tolist() == ref.integers(0, 2**20, 4).tolist()
-
-
-def test_scan_is_the_labelled_scan_points():
-    pose = (3.0, 1.0, 0.2)
-    a = LidarSimulator(straight(), seed=7).scan(pose, 2.0)
-    b = LidarSimulator(straight(), seed=7).scan_labelled(pose, 2.0).points
-    assert a.tobytes() == b.tobytes()
