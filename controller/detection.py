@@ -315,11 +315,17 @@ def _principal(pts: np.ndarray) -> tuple[float, float, float, float]:
     """Centre (x, y) and unit direction (x, y) of the total-least-squares line through the
     points (the major axis of their 2x2 covariance, in closed form), as floats."""
     n = len(pts)
-    sx, sy = float(pts[:, 0].sum()), float(pts[:, 1].sum())  # (column sums: faster)
+    if n > len(_ONES):
+        sx, sy = float(pts[:, 0].sum()), float(pts[:, 1].sum())
+    else:  # (column sums as one product with ones: one call, not two)
+        sx, sy = (_ONES[:n] @ pts).tolist()
     mxx, mxy, _, myy = (pts.T @ pts).ravel().tolist()
     cx, cy = sx / n, sy / n
     angle = 0.5 * math.atan2(2.0 * (mxy / n - cx * cy), (mxx / n - cx * cx) - (myy / n - cy * cy))
     return cx, cy, math.cos(angle), math.sin(angle)
+
+
+_ONES = np.ones(4096)
 
 
 def _occupancy(xy: np.ndarray, cfg: DetectionConfig):
@@ -501,22 +507,23 @@ def _bands(lines, xy: np.ndarray, reach: float, inlier: float) -> np.ndarray:
 
 
 def _near_chords(pts: np.ndarray, chords, band: float) -> np.ndarray:
-    """Which points lie within `band` of one of the chords ((x, y), (x, y))."""
-    near = None
-    for (ax, ay), (bx, by) in chords:
-        dx, dy = bx - ax, by - ay
-        d2 = dx * dx + dy * dy
-        rel = pts - (ax, ay)
-        t = rel @ np.array((dx / d2, dy / d2)) if d2 > 0 else np.zeros(len(pts))
-        np.clip(t, 0.0, 1.0, out=t)
-        rel -= t[:, None] * (dx, dy)
-        rel *= rel
-        m = rel @ _ONES2 <= band * band  # (a row sum; sum(axis=1) is slow on (N, 2))
-        near = m if near is None else near | m
-    return near
-
-
-_ONES2 = np.ones(2)
+    """Which points lie within `band` of one of the chords ((x, y), (x, y)); all chords at
+    once, as an (N, C) table of each point's nearest position on each chord."""
+    c = np.array(chords, float).reshape(-1, 4)
+    ax, ay = c[:, 0], c[:, 1]
+    dx, dy = c[:, 2] - ax, c[:, 3] - ay
+    d2 = dx * dx + dy * dy
+    safe = np.where(d2 > 0, d2, 1.0)  # a chord of no length: t = 0, its one point
+    rx = pts[:, 0:1] - ax  # (N, C)
+    ry = pts[:, 1:2] - ay
+    t = rx * (dx / safe) + ry * (dy / safe)
+    np.clip(t, 0.0, 1.0, out=t)
+    rx -= t * dx
+    ry -= t * dy
+    rx *= rx
+    ry *= ry
+    rx += ry
+    return (rx <= band * band).any(axis=1)
 
 
 def _max_gap(cfg: DetectionConfig, range_m):

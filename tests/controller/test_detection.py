@@ -236,3 +236,25 @@ def test_column_major_cloud_gives_the_same_segments():
     b = detect_segments(np.asfortranarray(cloud), pose)
     assert len(a) == 2 and np.array_equal(a, b)
     assert np.array_equal(crop_mask(np.asfortranarray(cloud)), crop_mask(cloud))
+
+
+def test_near_chords_and_principal_match_simple_references():
+    """The one-table chord test and the moment fit against plain per-chord, per-point maths."""
+    from controller.detection import _near_chords, _principal
+
+    rng = np.random.default_rng(7)
+    pts = rng.uniform(-5.0, 5.0, (300, 2))
+    chords = [((-4.0, -1.0), (3.0, 2.0)), ((1.0, 1.0), (1.0, 1.0)), ((0.0, 4.0), (0.0, -4.0))]
+    a = np.array([c[0] for c in chords])
+    b = np.array([c[1] for c in chords])
+    dist = point_segment_distance(pts, a, b)
+    for band in (0.1, 0.5, 1.5):
+        np.testing.assert_array_equal(_near_chords(pts, chords, band), (dist <= band).any(axis=1))
+    line = pts[:40] * np.array([1.0, 0.0]) + np.array([2.0, -3.0])
+    line[:, 1] += 0.5 * line[:, 0] + rng.normal(0.0, 0.01, 40)
+    cx, cy, vx, vy = _principal(line)
+    centred = line - line.mean(axis=0)
+    w, v = np.linalg.eigh(centred.T @ centred)
+    major = v[:, np.argmax(w)]
+    assert (cx, cy) == pytest.approx(tuple(line.mean(axis=0)), abs=1e-12)
+    assert abs(vx * major[1] - vy * major[0]) < 1e-9 and math.hypot(vx, vy) == pytest.approx(1.0)
