@@ -39,7 +39,7 @@ import numpy as np
 
 from .errors import InputError
 from .model import SMOOTH, Variant, augmented_ode, rk4
-from .obstacle import super_ellipse_margin
+from .obstacle import hull_circle_centres, super_ellipse_margin
 from .params import IDENTIFIED, PARAM_NAMES, BoatParams
 from .segment_slots import SLOT_FIELDS
 
@@ -196,12 +196,6 @@ def dynamics_function(config: NmpcConfig) -> ca.Function:
                        ["x", "u", "p", "current"], ["x_next"])
 
 
-def hull_circles(x, offsets):
-    """Centres of the two hull circles for state x: offsets along the body x axis."""
-    c, s = ca.cos(x[2]), ca.sin(x[2])
-    return [(x[0] + d * c, x[1] + d * s) for d in offsets]
-
-
 def clearance_function(config: NmpcConfig) -> ca.Function:
     """h >= 0 for each hull circle and segment slot at one stage (eq. mpc:pnorm, 4th root).
 
@@ -214,7 +208,7 @@ def clearance_function(config: NmpcConfig) -> ca.Function:
     Rb, dp = geometry[0], geometry[1]
     s = x[NX - 1]
     h = []
-    for px, py in hull_circles(x, [geometry[2], geometry[3]]):
+    for px, py in hull_circle_centres(x[0], x[1], x[2], [geometry[2], geometry[3]]):
         for j in range(config.segment_slots):
             xc, yc, th, length, active = (slots[k, j] for k in range(len(SLOT_FIELDS)))
             margin = Rb + dp + s  # the slack softens the separation all round, ends included
