@@ -10,7 +10,6 @@ receives with the virtual time, so tests can decode what the bridge sent and in 
 from __future__ import annotations
 
 import math
-import socket
 
 import numpy as np
 import pytest
@@ -19,17 +18,10 @@ import bridge.link  # noqa: F401 - sets MAVLink 2 before any connection is made
 from bridge.ardupilot import DEFAULT_PARAMS, MODE_NAMES, MODES
 from bridge.clock import VirtualClock
 from bridge.ekf_state import ned_to_geodetic
+from bridge.mavlink_plant import free_udp_port
 from pymavlink import mavutil
 
 EKF_GOOD = 1 | 2 | 4 | 8 | 16 | 32
-
-
-def free_udp_port() -> int:
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
 
 
 class FakeAutopilot:

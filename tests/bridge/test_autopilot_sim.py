@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import hashlib
 import math
-import socket
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +18,7 @@ from bridge.autopilot_rc import RcInput
 from bridge.autopilot_sim import AutopilotSim, open_connection
 from bridge.clock import VirtualClock
 from bridge.main import main
+from bridge.mavlink_plant import free_udp_port
 from bridge.signing import load_signing_key
 from controller.errors import InputError
 from scenarios.scenario_file import load_scenario
@@ -40,14 +40,6 @@ EKF_POS_HORIZ_ABS = 16
 @pytest.fixture(scope="module")
 def scenario():
     return load_scenario(STRAIGHT)
-
-
-def free_udp_port() -> int:
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
 
 
 class Rig:
