@@ -11,31 +11,10 @@ from bridge.mavlink_plant import LinkFaults, MavlinkSimPlant
 from scenarios.runner import PLANTS, run_scenario
 from scenarios.scenario_file import parse_scenario
 
-SHORT = """
-[scenario]
-name = "mavlink-short"
-duration_s = 110
-seed = 3
-
-[canal]
-centre_line = [[0, 0], [60, 0], [110, 30], [140, 30]]
-corner_radius_m = 30
-width_m = 16
-
-[route]
-spacing_m = 15
-
-[sensors]
-perception = "known-walls"
-
-[controller]
-d_p_m = 2.0
-"""
-
 
 @pytest.fixture(scope="module")
-def scenario():
-    return parse_scenario(SHORT, "short.toml")
+def scenario(short_bend_toml):
+    return parse_scenario(short_bend_toml, "short.toml")
 
 
 @pytest.fixture(scope="module")

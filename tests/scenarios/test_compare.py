@@ -4,31 +4,10 @@ import json
 
 from bridge.main import main
 
-SHORT = """
-[scenario]
-name = "compare-short"
-duration_s = 110
-seed = 3
 
-[canal]
-centre_line = [[0, 0], [60, 0], [110, 30], [140, 30]]
-corner_radius_m = 30
-width_m = 16
-
-[route]
-spacing_m = 15
-
-[sensors]
-perception = "known-walls"
-
-[controller]
-d_p_m = 2.0
-"""
-
-
-def test_compare_runs_the_three_controllers(tmp_path, capsys):
+def test_compare_runs_the_three_controllers(tmp_path, capsys, short_bend_toml):
     path = tmp_path / "short.toml"
-    path.write_text(SHORT)
+    path.write_text(short_bend_toml)
     out = tmp_path / "cmp"
     assert main(["compare", str(path), "--out", str(out)]) == 0
     table = capsys.readouterr().out
