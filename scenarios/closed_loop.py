@@ -2,8 +2,9 @@
 
 One control period (0.1 s) is: perceive segments, run the controller on the estimated state,
 then step the plant in IMU periods (0.01 s) with the command held, fusing AHRS every IMU
-period and GPS every 0.2 s. Every control step is appended to the log as it happens, so an
-interrupted run loses nothing; the summary and plots come at the end.
+period and GPS every 0.2 s (a plant with its own estimate, such as an autopilot's EKF over
+MAVLink, replaces the sensors and the filter). Every control step is appended to the log as it
+happens, so an interrupted run loses nothing; the summary and plots come at the end.
 """
 
 from __future__ import annotations
@@ -113,6 +114,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
     ahrs = AhrsSensor(AhrsConfig(), seed=cfg.seed * 7919 + 2)
     out: PlantOutput = plant.reset(np.asarray(state0, float), cfg.current_ne)
     nav = NavigationFilter(out.state)
+    own_estimate = out.estimate is None  # else the plant estimates (an autopilot's EKF)
 
     command = np.zeros(2)
     rows_t, rows_clear, rows_cmd, rows_xt, solve_s = [], [], [], [], []
@@ -125,7 +127,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
         imu_k = 0
         for k in range(n_steps):
             t = k * cfg.control_period_s
-            est = nav.state if out.estimate is None else np.asarray(out.estimate, float)
+            est = nav.state if own_estimate else np.asarray(out.estimate, float)
             t0 = time.perf_counter()
             segs = np.asarray(perception.segments(t, out.state, est), float).reshape(-1, 4)
             t1 = time.perf_counter()
@@ -163,6 +165,9 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
                     ta = time.perf_counter()
                     out = plant.step(command, cfg.imu_period_s)
                     tb = time.perf_counter()
+                    timer.add("plant", tb - ta)
+                    if not own_estimate:
+                        continue
                     sample = ahrs.measure(out.state, out.state_dot)
                     nav.predict(cfg.imu_period_s, sample.accel_body)
                     nav.update_ahrs(sample.heading_rad, sample.yaw_rate_radps)
@@ -170,7 +175,6 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
                     if imu_k % gps_every == 0:
                         fix = gps.measure(out.state)
                         nav.update_gps(fix.position_ne, fix.velocity_ne)
-                    timer.add("plant", tb - ta)
                     timer.add("navigation", time.perf_counter() - tb)
             except PlantFailure as exc:  # e.g. a lost MAVLink link: what was logged stays
                 status = f"plant failed: {exc}"
