@@ -15,6 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from controller.geometry import wrap_angle
+
 
 
 @dataclass(frozen=True)
@@ -39,14 +41,8 @@ class Estimate:
     east_m: float
     vn_mps: float
     ve_mps: float
-    psi_rad: float  # wrapped to (-pi, pi]
+    psi_rad: float  # wrapped to [-pi, pi)
     r_radps: float
-
-
-def wrap_pi(a: float) -> float:
-    """Angle to (-pi, pi]."""
-    w = math.remainder(a, 2 * math.pi)
-    return math.pi if w == -math.pi else w
 
 
 class EkfModel:
@@ -85,5 +81,5 @@ class EkfModel:
         return Estimate(
             north_m=x + e[0], east_m=y + e[1],
             vn_mps=c * u - s * v + e[3], ve_mps=s * u + c * v + e[4],
-            psi_rad=wrap_pi(psi + e[2]), r_radps=r + e[5],
+            psi_rad=float(wrap_angle(psi + e[2])), r_radps=r + e[5],
         )

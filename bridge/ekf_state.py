@@ -15,6 +15,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from controller.geometry import wrap_angle
+
 # EKF_STATUS_REPORT.flags (MAVLink EKF_STATUS_FLAGS).
 EKF_ATTITUDE = 1
 EKF_VELOCITY_HORIZ = 2
@@ -89,7 +91,7 @@ def _heading_at(attitude, time_boot_s: float) -> float:
     psi = float(attitude.yaw)
     if abs(dt) <= MAX_ATTITUDE_SKEW_S:
         psi += float(attitude.yawspeed) * dt
-    return math.atan2(math.sin(psi), math.cos(psi))
+    return float(wrap_angle(psi))
 
 
 def state_from_local(attitude, local, received_s: float) -> EkfState:
@@ -125,7 +127,7 @@ def predict_vector(state, dt: float) -> np.ndarray:
         ds, dc = math.sin(psi1) - math.sin(psi), math.cos(psi1) - math.cos(psi)
         dx = (u * ds + v * dc) / r
         dy = (-u * dc + v * ds) / r
-    psi1 = math.atan2(math.sin(psi1), math.cos(psi1))
+    psi1 = float(wrap_angle(psi1))
     return np.array([x + dx, y + dy, psi1, u, v, r])
 
 
