@@ -9,7 +9,6 @@ later behind the same `scan` method.
 from __future__ import annotations
 
 import bisect
-import math
 import re
 from pathlib import Path
 from typing import Protocol
@@ -17,6 +16,7 @@ from typing import Protocol
 import numpy as np
 
 from controller.errors import InputError
+from scenarios.lidar import sensor_rotation
 
 SCAN_SUFFIXES = (".npy", ".bin")
 
@@ -55,12 +55,7 @@ def mount_transform(mount) -> tuple[np.ndarray, np.ndarray]:
     p_body = R p_sensor + t, R = Rz(yaw) Ry(pitch) Rx(roll) as `scenarios.lidar.LidarMount`.
     A sensor that reports x forward, y left, z up (ROS) has roll = 180 deg."""
     x, y, z, roll, pitch, yaw = (float(v) for v in mount)
-    cr, sr, cp, sp, cy, sy = (math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch),
-                              math.cos(yaw), math.sin(yaw))
-    rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
-    ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
-    rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
-    return rz @ ry @ rx, np.array([x, y, z])
+    return sensor_rotation(roll, pitch, yaw), np.array([x, y, z])
 
 
 class ReplayLidarSource:

@@ -40,6 +40,17 @@ LABEL_NAMES = ("water", "wall face", "quay top", "backdrop", "obstacle", "own hu
 # 5 obstacle.
 
 
+def sensor_rotation(roll_rad: float, pitch_rad: float, yaw_rad: float) -> np.ndarray:
+    """Sensor to body frame (both x forward, y right, z down): Rz(yaw) Ry(pitch) Rx(roll)."""
+    cy, sy = np.cos(yaw_rad), np.sin(yaw_rad)
+    cp, sp = np.cos(pitch_rad), np.sin(pitch_rad)
+    cr, sr = np.cos(roll_rad), np.sin(roll_rad)
+    rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
+    ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
+    rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
+    return rz @ ry @ rx
+
+
 @dataclass(frozen=True)
 class LidarMount:
     """One sensor: where it sits on the boat, how it points, and its beam pattern.
@@ -73,14 +84,8 @@ class LidarMount:
             raise InputError(f"lidar {self.name!r}: elevation_min_rad above elevation_max_rad")
 
     def rotation(self) -> np.ndarray:
-        """Sensor to body frame (both x forward, y right, z down): Rz(yaw) Ry(pitch) Rx(roll)."""
-        cy, sy = np.cos(self.yaw_rad), np.sin(self.yaw_rad)
-        cp, sp = np.cos(self.pitch_rad), np.sin(self.pitch_rad)
-        cr, sr = np.cos(self.roll_rad), np.sin(self.roll_rad)
-        rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
-        ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
-        rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
-        return rz @ ry @ rx
+        """Sensor to body frame (both x forward, y right, z down)."""
+        return sensor_rotation(self.roll_rad, self.pitch_rad, self.yaw_rad)
 
     def beam_directions(self) -> np.ndarray:
         """Unit beam directions in the body frame (z down): (channels * columns, 3)."""
