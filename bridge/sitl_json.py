@@ -37,7 +37,7 @@ import numpy as np
 
 from controller.errors import InputError
 
-from .rc_mapping import RcCalibration
+from .rc_mapping import RcCalibration, RcMapping
 
 log = logging.getLogger(__name__)
 
@@ -110,11 +110,8 @@ def pwm_to_commands(pwm: tuple[int, ...], steering: RcCalibration,
                     throttle: RcCalibration) -> tuple[float, float]:
     """Servo PWM to our (nT, nS) percent. Steering above trim turns to starboard, which is
     nS < 0 in our model; throttle below trim is reverse; 0 (or a missing channel) is neutral."""
-    def percent(cal: RcCalibration) -> float:
-        value = pwm[cal.channel - 1] if cal.channel <= len(pwm) else 0
-        return 0.0 if value == 0 else cal.to_percent(value)
-
-    return percent(throttle), -percent(steering)
+    live = {channel: value for channel, value in enumerate(pwm, start=1) if value != 0}
+    return RcMapping(steering, throttle).to_commands(live)  # a missing channel reads trim
 
 
 @dataclass(frozen=True)
