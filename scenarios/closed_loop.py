@@ -218,6 +218,13 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
         "real_time_factor": duration / wall if wall > 0 else None,
         "where_the_time_goes_s": {k: round(v, 4) for k, v in sorted(timer.total.items())},
     }
+    behind = getattr(perception, "time_s", None)  # the LiDAR's own time, maybe on another core
+    if behind is not None:
+        timing["perception"] = {
+            "parallel": bool(getattr(perception, "parallel", False)),
+            **{f"{k}_s": round(v, 4) for k, v in sorted(behind.items())},
+            "scans": len(getattr(perception, "points_per_scan", ())),
+        }
     (out_dir / "snapshots.json").write_text(json.dumps([
         {"time_s": sn.time_s, "state": sn.state.tolist(),
          "predicted": None if sn.predicted is None else np.asarray(sn.predicted).tolist(),

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from controller.geometry import clip_segments_to_circle, simplify_polyline
@@ -42,11 +44,17 @@ class LidarPerception:
         self.simulator = LidarSimulator(world, config, seed=seed * 7919 + 3)
         self.detection = detection or DEFAULT
         self.points_per_scan: list[int] = []
+        self.time_s = {"lidar_scan": 0.0, "detection": 0.0}  # wall time, summed over scans
 
     def segments(self, time_s, true_state, estimated_state) -> np.ndarray:
         from controller.detection import detect_segments
 
         true_state = np.asarray(true_state, float)
+        t0 = time.perf_counter()
         points = self.simulator.scan(true_state[:3], speed_mps=float(true_state[3]))
+        t1 = time.perf_counter()
         self.points_per_scan.append(len(points))
-        return detect_segments(points, np.asarray(estimated_state, float)[:3], self.detection)
+        found = detect_segments(points, np.asarray(estimated_state, float)[:3], self.detection)
+        self.time_s["lidar_scan"] += t1 - t0
+        self.time_s["detection"] += time.perf_counter() - t1
+        return found

@@ -35,14 +35,16 @@ PLANTS: dict[str, Callable] = {"fmu": _fmu_plant, "python-model": _model_plant}
 """Plant factories by name: f(scenario, out_dir) -> Plant."""
 
 
-def make_perception(scenario: Scenario):
+def make_perception(scenario: Scenario, parallel: bool | None = None):
+    """Known walls, or the simulated LiDAR and detection one control period behind the
+    controller (in a worker process if `parallel`; None: when there is a second core)."""
     if scenario.perception == "known-walls":
         from scenarios.perception import KnownWalls
 
         return KnownWalls(scenario.world, scenario.known_walls_range_m, AIR_DRAFT_M)
-    from scenarios.perception import LidarPerception
+    from scenarios.perception_pipeline import DelayedLidarPerception
 
-    return LidarPerception(scenario.world, seed=scenario.seed)
+    return DelayedLidarPerception(scenario.world, seed=scenario.seed, parallel=parallel)
 
 
 def make_controller(scenario: Scenario, name: str | None = None):
@@ -81,8 +83,9 @@ waypoints with no planner (blind to walls: a reference point, not a baseline).""
 
 def run_scenario(scenario: Scenario, out_dir: Path, controller: str | None = None,
                  seed: int | None = None, plant: str = "fmu", plots: bool = True,
-                 progress=None) -> RunResult:
-    """Run one scenario into `out_dir` (log.csv, summary.json, timing.json, PNG plots)."""
+                 progress=None, parallel_perception: bool | None = None) -> RunResult:
+    """Run one scenario into `out_dir` (log.csv, summary.json, timing.json, PNG plots).
+    `parallel_perception` changes the wall time only, never the results."""
     if plant not in PLANTS:
         raise InputError(f"plant {plant!r} is not available (choose from: {', '.join(PLANTS)})")
     out_dir = Path(out_dir)
@@ -93,8 +96,12 @@ def run_scenario(scenario: Scenario, out_dir: Path, controller: str | None = Non
 
         scenario = replace(scenario, seed=seed)
     ctrl = make_controller(scenario, controller)
-    perception = make_perception(scenario)
-    the_plant = PLANTS[plant](scenario, out_dir)
+    perception = make_perception(scenario, parallel_perception)
+    try:
+        the_plant = PLANTS[plant](scenario, out_dir)
+    except BaseException:
+        _close(perception)
+        raise
     cfg = LoopConfig(
         duration_s=scenario.duration_s, waypoints=scenario.waypoints,
         outlines=tuple(scenario.world.surfaces(AIR_DRAFT_M)),
@@ -107,6 +114,7 @@ def run_scenario(scenario: Scenario, out_dir: Path, controller: str | None = Non
                                  out_dir, progress=progress, scenario_name=scenario.name)
     finally:
         the_plant.close()
+        _close(perception)
     if plots:
         from scenarios import plots as p
 
@@ -117,6 +125,12 @@ def run_scenario(scenario: Scenario, out_dir: Path, controller: str | None = Non
                           out_dir / "separation.png", title)
         p.plot_states(out_dir, out_dir / "states.png", title)
     return result
+
+
+def _close(perception) -> None:
+    close = getattr(perception, "close", None)
+    if close is not None:
+        close()
 
 
 def _default_snapshots(scenario: Scenario) -> tuple:

@@ -20,6 +20,9 @@ def register(sub) -> None:
     p.add_argument("--seed", type=int, default=None, help="noise seed (default: the scenario's)")
     p.add_argument("--plant", default="fmu", help="plant: fmu (default), python-model, mavlink-sim")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    p.add_argument("--serial-perception", action="store_true",
+                   help="scan and detect in this process, not in a worker on another core "
+                   "(same results, more wall time)")
     p.set_defaults(func=run)
 
 
@@ -33,7 +36,8 @@ def run(args) -> int:
     out = Path(args.out or f"runs/{scenario.name}-{controller}")
     progress = terminal_progress() if sys.stderr.isatty() else None
     result = run_scenario(scenario, out, controller=controller, seed=args.seed,
-                          plant=args.plant, plots=not args.no_plots, progress=progress)
+                          plant=args.plant, plots=not args.no_plots, progress=progress,
+                          parallel_perception=False if args.serial_perception else None)
     if progress:
         sys.stderr.write("\n")
     s, t = result.summary, result.timing

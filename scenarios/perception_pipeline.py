@@ -1,0 +1,192 @@
+"""LiDAR perception one control period behind the controller, optionally in its own process.
+
+On the boat the LiDAR driver and the wall detector run beside the controller, not inside its
+loop: at t_k the NMPC uses the segments of the scan taken at t_(k-1) (the first step waits for
+its own). Modelling that latency also frees the scan for step k + 1 from waiting for the
+controller and the plant of step k, so a worker process on another core renders and detects it
+meanwhile. Serial and parallel runs make the same scans, in the same order, from the same
+seed, so they give the same segments bit for bit; only the wall time differs.
+
+The worker is `python -m scenarios.perception_pipeline`, spoken to over its stdin and stdout
+with pickled messages: no fork of a process that holds CasADi, fmpy and OpenCV state, and no
+re-import of the caller's `__main__`.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import subprocess
+import sys
+import traceback
+import weakref
+from pathlib import Path
+
+import numpy as np
+
+from scenarios.perception import LidarPerception
+
+
+class PerceptionWorkerError(RuntimeError):
+    """The perception worker process died or could not be started."""
+
+
+class DelayedLidarPerception:
+    """`LidarPerception` with a one-period latency; `parallel` runs it in a worker process
+    (default: when the machine has more than one core)."""
+
+    name = "lidar"
+
+    def __init__(self, world, seed: int = 0, config=None, detection=None,
+                 parallel: bool | None = None):
+        self.parallel = (os.cpu_count() or 1) > 1 if parallel is None else bool(parallel)
+        self.points_per_scan: list[int] = []
+        self.time_s = {"lidar_scan": 0.0, "detection": 0.0}
+        self._ready = None  # serial: (segments, points, timing) of the last request
+        self._requested = False
+        args = (world, seed, config, detection)
+        if self.parallel:
+            self._worker = _Worker(args)
+            self._inner = None
+        else:
+            self._worker = None
+            self._inner = LidarPerception(*args)
+
+    def segments(self, time_s, true_state, estimated_state) -> np.ndarray:
+        """The segments of the previous call's scan; scans this pose for the next call."""
+        request = (float(time_s), np.array(true_state, float), np.array(estimated_state, float))
+        if not self._requested:
+            self._request(request)
+        found = self._collect()
+        self._request(request)
+        return found
+
+    def close(self) -> None:
+        if self._worker is not None:
+            self._worker.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _request(self, request) -> None:
+        self._requested = True
+        if self._worker is not None:
+            self._worker.send(request)
+            return
+        found = self._inner.segments(*request)
+        self._ready = (found, self._inner.points_per_scan[-1], dict(self._inner.time_s))
+
+    def _collect(self) -> np.ndarray:
+        if self._worker is None:
+            found, n_points, time_s = self._ready
+        else:
+            found, n_points, time_s = self._worker.receive()
+        self.points_per_scan.append(n_points)
+        self.time_s = time_s
+        return found
+
+
+class _Worker:
+    """The client side of one worker process."""
+
+    def __init__(self, args):
+        root = str(Path(__file__).resolve().parents[1])
+        env = dict(os.environ)
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
+        try:
+            self._proc = subprocess.Popen(
+                [sys.executable, "-m", "scenarios.perception_pipeline"],
+                stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
+        except OSError as exc:
+            raise PerceptionWorkerError(f"perception worker: could not start "
+                                        f"{sys.executable}: {exc}") from None
+        self._finalizer = weakref.finalize(self, _stop, self._proc)
+        self.send(args)
+
+    def send(self, message) -> None:
+        try:
+            pickle.dump(message, self._proc.stdin, protocol=pickle.HIGHEST_PROTOCOL)
+            self._proc.stdin.flush()
+        except (BrokenPipeError, OSError, ValueError):
+            raise self._died() from None
+
+    def receive(self):
+        try:
+            kind, *rest = pickle.load(self._proc.stdout)
+        except (EOFError, OSError, ValueError, pickle.UnpicklingError):
+            raise self._died() from None
+        if kind == "error":
+            exc, where = rest
+            exc.add_note("(raised in the LiDAR perception worker)\n" + where)
+            raise exc
+        return rest
+
+    def close(self) -> None:
+        self._finalizer()
+
+    def _died(self) -> PerceptionWorkerError:
+        try:
+            code = self._proc.wait(timeout=2.0)
+        except subprocess.TimeoutExpired:
+            code = None
+        self.close()
+        return PerceptionWorkerError(
+            f"perception worker (pid {self._proc.pid}) stopped answering "
+            f"(exit code {code}); its error, if any, is on stderr above")
+
+
+def _stop(proc: subprocess.Popen) -> None:
+    """Ask the worker to finish (None, then end of input); kill it if it does not."""
+    try:
+        pickle.dump(None, proc.stdin)
+        proc.stdin.close()
+    except (OSError, ValueError):
+        pass
+    try:
+        proc.wait(timeout=5.0)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+    if proc.stdout is not None:
+        proc.stdout.close()
+
+
+def _serve(inp, out) -> int:
+    """The worker: build the perception from the first message, then answer each request
+    (time, true state, estimated state) with ("ok", segments, points, timing) or
+    ("error", exception, traceback)."""
+    args = pickle.load(inp)
+    try:
+        perception, failure = LidarPerception(*args), None
+    except Exception as exc:  # reported on the first request, where the caller waits
+        perception, failure = None, (exc, traceback.format_exc())
+    while True:
+        try:
+            request = pickle.load(inp)
+        except EOFError:
+            return 0
+        if request is None:
+            return 0
+        if failure is not None:
+            reply = ("error", *failure)
+        else:
+            try:
+                found = perception.segments(*request)
+                reply = ("ok", found, perception.points_per_scan[-1], dict(perception.time_s))
+            except Exception as exc:
+                reply = ("error", exc, traceback.format_exc())
+        try:
+            data = pickle.dumps(reply, protocol=pickle.HIGHEST_PROTOCOL)
+        except Exception:  # an exception that does not pickle: send its text
+            data = pickle.dumps(("error", RuntimeError(repr(reply[1])), reply[2]))
+        out.write(data)
+        out.flush()
+
+
+if __name__ == "__main__":
+    _out = sys.stdout.buffer
+    sys.stdout = sys.stderr  # nothing but replies may reach the pipe
+    sys.exit(_serve(sys.stdin.buffer, _out))

@@ -1,0 +1,101 @@
+"""LiDAR perception one control period behind, in this process or in a worker process."""
+
+import math
+
+import numpy as np
+import pytest
+
+from controller.errors import InputError
+from scenarios.perception import LidarPerception
+from scenarios.perception_pipeline import DelayedLidarPerception, PerceptionWorkerError
+from scenarios.world import CanalWorld
+
+
+@pytest.fixture(scope="module")
+def world():
+    centre = np.column_stack([np.linspace(-150, 150, 151), np.zeros(151)])
+    return CanalWorld.from_centre_line(centre, 14.0, wall_height_m=1.5)
+
+
+def poses(n=6):
+    """A boat going down the canal, 0.2 m and a little heading per step, with a small
+    estimate error (so the true and estimated poses differ, as in the loop)."""
+    out = []
+    for k in range(n):
+        true = np.array([0.2 * k, 0.5, math.radians(2.0 * k), 2.0, 0.0, 0.0])
+        est = true[:3] + (0.05, -0.03, 0.002)
+        out.append((0.1 * k, true, est))
+    return out
+
+
+def test_segments_are_those_of_the_previous_scan(world):
+    direct = LidarPerception(world, seed=4)
+    delayed = DelayedLidarPerception(world, seed=4, parallel=False)
+    steps = poses()
+    expected = [direct.segments(*steps[0])]  # the first step waits for its own scan ...
+    expected += [direct.segments(*s) for s in steps[:-1]]  # ... then one period behind
+    got = [delayed.segments(*s) for s in steps]
+    assert len(got[0]) >= 2  # both walls seen
+    for e, g in zip(expected, got):
+        np.testing.assert_array_equal(e, g)
+    assert not np.array_equal(got[1], got[-1])  # the scans do move with the boat
+    assert len(delayed.points_per_scan) == len(steps)
+    assert delayed.time_s["lidar_scan"] > 0 and delayed.time_s["detection"] > 0
+
+
+def test_worker_process_gives_the_same_segments_bit_for_bit(world):
+    serial = DelayedLidarPerception(world, seed=9, parallel=False)
+    with DelayedLidarPerception(world, seed=9, parallel=True) as parallel:
+        for step in poses():
+            np.testing.assert_array_equal(serial.segments(*step), parallel.segments(*step))
+        assert parallel.points_per_scan == serial.points_per_scan
+        proc = parallel._worker._proc
+    assert proc.poll() is not None  # closed: the worker has exited
+
+
+def test_an_error_in_the_worker_reaches_the_caller_with_its_message(world):
+    with DelayedLidarPerception(world, seed=1, parallel=True) as p:
+        t, true, est = poses(1)[0]
+        p.segments(t, true, est)
+        p.segments(t, true, [np.nan, 0.0, 0.0])  # this scan is detected at the next call
+        with pytest.raises(InputError, match="pose must be three finite numbers") as info:
+            p.segments(t, true, est)
+        assert "perception worker" in "".join(getattr(info.value, "__notes__", []))
+
+
+def test_a_dead_worker_is_reported_not_waited_for(world):
+    with DelayedLidarPerception(world, seed=1, parallel=True) as p:
+        step = poses(1)[0]
+        p.segments(*step)
+        p._worker._proc.kill()
+        p._worker._proc.wait()
+        with pytest.raises(PerceptionWorkerError, match="stopped answering"):
+            p.segments(*step)
+
+
+def test_a_run_gives_the_same_files_with_the_worker_or_without(tmp_path):
+    from dataclasses import replace
+    from pathlib import Path
+
+    from scenarios.runner import run_scenario
+    from scenarios.scenario_file import load_scenario
+
+    root = Path(__file__).resolve().parents[2]
+    scenario = replace(load_scenario(root / "scenarios" / "straight.toml"), duration_s=15.0)
+    assert scenario.perception == "lidar"
+    runs = {}
+    for parallel in (False, True):
+        out = tmp_path / str(parallel)
+        result = run_scenario(scenario, out, plots=False, parallel_perception=parallel)
+        assert result.timing["perception"]["parallel"] is parallel
+        assert result.timing["perception"]["scans"] == result.summary["steps"]
+        runs[parallel] = [(out / f).read_bytes() for f in ("summary.json", "segments.csv")]
+        runs[parallel].append(_without_column((out / "log.csv").read_text(), "solve_ms"))
+    assert runs[False] == runs[True]
+
+
+def _without_column(csv_text: str, name: str) -> list:
+    """The rows of a CSV text without one column (a wall-clock figure)."""
+    rows = [line.split(",") for line in csv_text.splitlines()]
+    k = rows[0].index(name)
+    return [row[:k] + row[k + 1:] for row in rows]
