@@ -99,3 +99,21 @@ def _without_column(csv_text: str, name: str) -> list:
     rows = [line.split(",") for line in csv_text.splitlines()]
     k = rows[0].index(name)
     return [row[:k] + row[k + 1:] for row in rows]
+
+
+def test_bench_loop_prints_both_modes_and_their_ratio(capsys):
+    import json
+    from pathlib import Path
+
+    from bridge.main import main
+
+    straight = Path(__file__).resolve().parents[2] / "scenarios" / "straight.toml"
+    assert main(["bench", "loop", str(straight), "--duration", "3"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["steps"] == 30 and report["same_summary"] is True
+    for mode in ("worker", "serial"):
+        assert report[mode]["real_time_factor"] > 0
+        assert set(report[mode]["loop_ms_per_step"]) >= {"plant", "navigation", "perception",
+                                                         "controller"}
+        assert report[mode]["lidar_ms_per_step"]["lidar_scan"] > 0
+    assert report["serial_over_worker_wall"] > 0

@@ -1,0 +1,78 @@
+"""`canalnav bench loop`: how fast the closed loop runs, and where its time goes.
+
+Runs one scenario (default: the Pohang canal, NMPC, LiDAR and EKF in the loop) with the
+LiDAR in a worker process and in this process, alternately `--repeats` times, and prints one
+JSON object: real-time factor and per-step milliseconds of each part for both, the ratio of
+their wall times from the same run, and whether the two gave the same summary.
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+import tempfile
+from dataclasses import replace
+from pathlib import Path
+
+
+def register_bench(sub) -> None:
+    p = sub.add_parser("loop", help="closed-loop speed (real-time factor, where the time goes), "
+                       "LiDAR in a worker process vs in the loop's process")
+    p.add_argument("scenario", nargs="?", default=None,
+                   help="scenario file (default: scenarios/pohang.toml)")
+    p.add_argument("--duration", type=float, default=120.0,
+                   help="simulated seconds per run (0: the scenario's own duration)")
+    p.add_argument("--repeats", type=int, default=1, help="runs of each mode, alternating")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from controller.errors import InputError
+    from scenarios.runner import run_scenario
+    from scenarios.scenario_file import load_scenario
+
+    path = Path(args.scenario) if args.scenario else Path(__file__).resolve().parents[1] / "pohang.toml"
+    scenario = load_scenario(path)
+    if args.duration < 0 or args.repeats < 1:
+        raise InputError("bench loop: --duration must be >= 0 and --repeats >= 1")
+    if args.duration > 0:
+        scenario = replace(scenario, duration_s=min(args.duration, scenario.duration_s))
+    results = {"worker": [], "serial": []}
+    summaries = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for k in range(args.repeats):
+            for mode in ("worker", "serial") if k % 2 == 0 else ("serial", "worker"):
+                out = Path(tmp) / f"{mode}{k}"
+                r = run_scenario(scenario, out, plots=False,
+                                 parallel_perception=mode == "worker")
+                results[mode].append(r.timing)
+                summaries[mode] = (out / "summary.json").read_text()
+                steps = r.summary["steps"]
+    report = {"scenario": scenario.name, "controller": scenario.controller,
+              "simulated_s": round(steps * 0.1, 1), "steps": steps, "repeats": args.repeats}
+    for mode, timings in results.items():
+        report[mode] = _describe(timings, steps)
+    report["serial_over_worker_wall"] = round(
+        statistics.median(t["wall_time_s"] for t in results["serial"])
+        / statistics.median(t["wall_time_s"] for t in results["worker"]), 3)
+    report["same_summary"] = summaries["worker"] == summaries["serial"]
+    print(json.dumps(report, indent=2))
+    return 0
+
+
+def _describe(timings: list, steps: int) -> dict:
+    """Median real-time factor and per-step times (ms) of the runs of one mode."""
+    def per_step_ms(seconds):
+        return round(1e3 * statistics.median(seconds) / steps, 3)
+
+    parts = timings[0]["where_the_time_goes_s"].keys()
+    out = {"real_time_factor": round(statistics.median(t["real_time_factor"] for t in timings), 2),
+           "wall_s": round(statistics.median(t["wall_time_s"] for t in timings), 2),
+           "loop_ms_per_step": {p: per_step_ms([t["where_the_time_goes_s"][p] for t in timings])
+                                for p in parts}}
+    if "perception" in timings[0]:
+        out["lidar_ms_per_step"] = {
+            p: per_step_ms([t["perception"][f"{p}_s"] for t in timings])
+            for p in ("lidar_scan", "detection")}
+    out["solve_ms"] = timings[-1]["solve_ms"]
+    return out
