@@ -1,7 +1,7 @@
 """The NMPC of the paper's §III-B: the optimal control problem, written once.
 
-    min  sum_{i<Np} (x_i - r_i)' Q (x_i - r_i) + u_i' R u_i + rho s_i^2
-         + (x_Np - r_Np)' Q_T (x_Np - r_Np) + rho s_Np^2
+    min  sum_{i<Np} (x_i - r_i)' Q (x_i - r_i) + u_i' R u_i + rho (s_i - sbar_i)^2
+         + (x_Np - r_Np)' Q_T (x_Np - r_Np) + rho (s_Np - sbar_Np)^2
     s.t. x_0 = x_init,   x_{i+1} = f_d(x_i, u_i, P*)               (multiple shooting)
          |nT|, |nS| <= 100 %,  |dnT| <= 10 %/s,  |dnS| <= 40 %/s
          h(p_circle(x_i), L_j, s_i) >= 0   per hull circle, segment slot and stage (eq. mpc:pnorm)
@@ -13,6 +13,13 @@ leaves open, and why:
   both half axes (DESIGN.md: the minor one only): otherwise a segment's ends keep a hard margin
   R_b + d_p, and a short segment across the way (a wall's step where the canal narrows, a pier
   end) made the QP infeasible wherever the canal is narrower than twice that margin.
+- The slack is paid for from the clearance the canal forces the boat to give up, sbar_i <= 0
+  (`slack_reference`; 0 wherever the canal is at least 2 (R_b + d_p) wide, so there the cost
+  is the paper's rho s_i^2). Paid from 0, the unavoidable violation of a stretch narrower than
+  that cost rho s^2 for every 1 s stage inside it: the finite horizon planned to slow down
+  before the stretch and sprint through it (fewer stages inside), and in closed loop only the
+  slowing down was carried out (2.0 -> 0.9 m/s before the bench's 9 m stretch; a boat stopped
+  before an 8.5 m one). sbar_i enters as the slack's reference in w_ref: a runtime input.
 - The slack is carried as a ninth state, s_{i+1} = sigma_i with sigma_i a third input. Each
   stage's constraints then involve only that stage's variables, as structure-exploiting QP
   solvers (hpipm) need, and the terminal stage has its slack too.

@@ -2,7 +2,8 @@
 actuators, the segments and the waypoints; returns the commands and the plan.
 
 Per step: reference (forward from the previous progress), segment slots, warm start (the
-previous plan shifted by one control period), one solve (RTI by default), then the command
+previous plan shifted by one control period), the slack's reference (what a stretch narrower
+than 2 (R_b + d_p) forces, `slack_reference`), one solve (RTI by default), then the command
 `nT_0 + dnT_0 * dt`, `nS_0 + dnS_0 * dt`. A failed or non-finite solve is never passed on:
 the controller retries once from a safe guess (the reference itself), else follows the
 shifted previous plan, and after `max_failures` failed steps in a row raises `SolverError`:
@@ -22,6 +23,7 @@ from .nmpc import NU, NX, NX_BOAT, NmpcConfig, ParamLayout, build_ocp, pack_para
 from .reference import Reference, WaypointPath, reference_trajectory, waypoint_path
 from .rti import QpOptions, QpStep, SqpResult, sqp
 from .segment_slots import SLOT_FIELDS, fill_segment_slots
+from .slack_reference import forced_slack
 
 METHODS = ("rti", "sqp", "ipopt")
 
@@ -164,17 +166,20 @@ class NmpcController:
         x_init = np.concatenate([x, act])
         lbw, ubw = self._lbw.copy(), self._ubw.copy()
         lbw[self._x0_at] = ubw[self._x0_at] = np.concatenate([x_init, [0.0]])
+        slack_ref = self._slack_reference(reference, target_speed_mps, guess, x[:2], slots)
         w_ref = np.zeros(self.ocp.nw)
         w_ref[self.ocp.states_at[:, :NX_BOAT]] = reference.states
+        w_ref[self.ocp.states_at[1:, NX - 1]] = slack_ref
 
         fallback = ""
         if guess is None:
-            guess = self._safe_guess(x_init, reference)
+            guess = self._safe_guess(x_init, reference, slack_ref)
             result = self._solve(self._start_at(guess, x_init), p, w_ref, lbw, ubw)
         else:
             result = self._solve(self._start_at(guess, x_init), p, w_ref, lbw, ubw)
             if not result.ok:
-                retry = self._solve(self._safe_guess(x_init, reference), p, w_ref, lbw, ubw)
+                retry = self._solve(self._safe_guess(x_init, reference, slack_ref), p, w_ref,
+                                    lbw, ubw)
                 result = self._merge(result, retry)
                 fallback = "safe_guess" if retry.ok else ""
         if result.ok:
@@ -255,9 +260,29 @@ class NmpcController:
         w[self.ocp.state_index(0)] = np.concatenate([x_init, [0.0]])
         return w
 
-    def _safe_guess(self, x_init: np.ndarray, reference: Reference) -> np.ndarray:
-        """The reference itself, no slack, steering centred, and the throttle moving at its
-        rate limit toward the steady throttle of each stage's reference speed.
+    def _slack_reference(self, reference: Reference, speed_mps: float, guess, position,
+                         slots: np.ndarray) -> np.ndarray:
+        """s_1..s_Np's reference: the clearance the canal forces each stage to give up
+        (`slack_reference`), over the path between the stage's reference point and its place in
+        the warm start, widened by the hull circles' offsets and half a stage's travel."""
+        c = self.config
+        N, Ts = c.horizon, c.step_s
+        arcs = reference.progress_m + speed_mps * Ts * np.arange(1, N + 1)
+        lo, hi = arcs.copy(), arcs.copy()
+        if guess is not None:
+            xy = np.vstack([position, guess[self.ocp.states_at[1:, :2]]])
+            travelled = reference.progress_m + np.cumsum(np.hypot(*np.diff(xy, axis=0).T))
+            lo, hi = np.minimum(lo, travelled), np.maximum(hi, travelled)
+        widen = max(abs(o) for o in c.hull_offsets_m) + 0.5 * speed_mps * Ts
+        segments = slots[slots[:, -1] > 0, :4]
+        return forced_slack(self._path, lo - widen, hi + widen, segments,
+                            c.hull_radius_m + c.separation_m, c.slack_min_m)
+
+    def _safe_guess(self, x_init: np.ndarray, reference: Reference,
+                    slack_ref: np.ndarray | None = None) -> np.ndarray:
+        """The reference itself, the slack at its reference (what the canal forces), steering
+        centred, and the throttle moving at its rate limit toward the steady throttle of each
+        stage's reference speed.
 
         The ramp matters: thrust goes with nT |nT|, so a guess at nT = 0 (a boat at rest)
         linearises to a boat that can neither speed up nor steer, and its QP fails.
@@ -273,8 +298,11 @@ class NmpcController:
             nT[k + 1] = nT[k] + np.clip(target[k + 1] - nT[k], -c.dnT_max * Ts, c.dnT_max * Ts)
         states[:, 6] = np.clip(nT, -c.nT_max, c.nT_max)
         states[0, :NX_BOAT] = x_init
+        if slack_ref is not None:
+            states[1:, NX - 1] = slack_ref
         inputs = np.zeros((N, NU))
         inputs[:, 0] = np.diff(states[:, 6]) / Ts
+        inputs[:, 2] = states[1:, NX - 1]
         return self.ocp.pack(states, inputs)
 
     def _output(self, plan, act, reference, result: SqpResult, fallback: str,

@@ -1,0 +1,152 @@
+"""The slack's reference: the clearance the canal itself forces the boat to give up.
+
+Where the free width between two walls is below 2 (R_b + d_p), every path through gives up part
+of the separation, and the OCP's slack has to take it. Paid for from 0 with the paper's
+rho s^2, that unavoidable part cost rho s^2 for every 1 s stage inside the stretch, so the
+finite horizon traded it against progress: it planned to slow down before the stretch and
+sprint through it (fewer stages inside), and in closed loop only the slowing down was carried
+out, since the sprint always lay ahead (the bench's canal: 2.0 -> 0.9 m/s before a 9 m stretch
+at rho = 1e4, worse with a larger rho; the narrow scenario's boat stopped). So the slack is paid
+for from this forced value instead, rho (s_i - sbar_i)^2: the unavoidable violation is free,
+every metre beyond it (the boat off the middle) costs what it did, and wherever the canal is
+wide enough sbar_i = 0 and the cost is the paper's. A more negative slack only lets the boat
+closer to the walls, never pushes it there, so a reference on the generous side is safe; one
+on the stingy side is paid for and brings the old incentive back, in proportion.
+
+sbar(q) at a path point q: midway between the walls abeam to port and to starboard, the largest
+separation m' with which the OCP's super-ellipses (half axes l/2 + m' and m') leave that point
+free, less R_b + d_p (the distance alone is not enough: near a steep segment's ends the power-4
+shape reaches up to about 0.6 m further). The stage's value is the most negative sbar over the
+stretch of path the stage may lie on: from its reference point to its place in the warm start
+(they differ when the boat lags), widened by the hull circles' offsets and half a stage's
+travel, so neither circle of the predicted hull meets an unpaid narrowing. The segments are the
+ones in the OCP's slots.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .reference import WaypointPath
+
+_ABEAM_COS = 0.5  # a segment's nearest point counts as a side wall within 60 deg of the normal
+
+
+class _Frames:
+    """Points (n, 2) with path headings (n,) seen from segments (M, 4): each point's offsets
+    along and across each segment, and the path's starboard normal in each segment's frame."""
+
+    def __init__(self, points, headings, segments):
+        seg = np.asarray(segments, float)
+        ex, ey = np.cos(seg[:, 2]), np.sin(seg[:, 2])
+        dx = points[:, 0:1] - seg[:, 0]  # (n, M)
+        dy = points[:, 1:2] - seg[:, 1]
+        self.along = dx * ex + dy * ey
+        self.across = dy * ex - dx * ey
+        nx, ny = -np.sin(headings)[:, None], np.cos(headings)[:, None]
+        self.normal_along = nx * ex + ny * ey
+        self.normal_across = ny * ex - nx * ey
+        self.half = 0.5 * seg[:, 3]
+
+    def walls_abeam(self) -> tuple[np.ndarray, np.ndarray]:
+        """Distance (n,) to the nearest wall abeam to port and to starboard (inf if none): a
+        segment's nearest point within 60 deg of the path's normal (a wall across the way is
+        no side wall)."""
+        # point -> nearest point (np.minimum/maximum: np.clip costs 5x as much on small arrays)
+        va = np.minimum(np.maximum(self.along, -self.half), self.half) - self.along
+        vc = -self.across
+        dist = np.hypot(va, vc)
+        side = va * self.normal_along + vc * self.normal_across  # its starboard component
+        abeam = np.abs(side) >= _ABEAM_COS * dist
+        port = np.where(abeam & (side < 0), dist, np.inf).min(axis=1)
+        starboard = np.where(abeam & (side > 0), dist, np.inf).min(axis=1)
+        return port, starboard
+
+
+def free_width(points: np.ndarray, headings: np.ndarray, segments: np.ndarray) -> np.ndarray:
+    """Width (n,) between the nearest walls abeam to port and to starboard of each point
+    (inf where one side has none), for points (n, 2) on a path with headings (n,) and segments
+    (M, 4) rows (x_c, y_c, theta, length)."""
+    points = np.asarray(points, float).reshape(-1, 2)
+    if len(segments) == 0:
+        return np.full(len(points), np.inf)
+    port, starboard = _Frames(points, np.asarray(headings, float), segments).walls_abeam()
+    return port + starboard
+
+
+def separation_allowed(along: np.ndarray, across: np.ndarray, half: np.ndarray,
+                       margin_m: float, newton_steps: int = 4) -> np.ndarray:
+    """The largest separation m' <= margin_m (n,) with which each point, at offsets (n, M)
+    along and across segments of half length `half` (M,), lies outside every segment's
+    super-ellipse (half axes l/2 + m' and m', the OCP's constraint), approached from below.
+
+    Per point and segment, F(m') = (a / (l/2 + m'))^4 + (b / m')^4 - 1 is convex and
+    decreasing, and max(|b|, |a| - l/2) is a lower bound of its root: Newton's steps from there
+    climb toward the root without passing it, so the result never allows more separation than
+    the constraint does.
+    """
+    a, b = np.abs(along), np.abs(across)
+    a2, b2 = a * a, b * b
+    a4, b4 = a2 * a2, b2 * b2
+    # (x * x) ** 2 rather than x ** 4: numpy's power is ten times slower
+    inside = a4 / _pow4(half + margin_m) + b4 / margin_m**4 < 1.0
+    if not inside.any():
+        return np.full(len(a), float(margin_m))
+    m = np.maximum(np.maximum(b, a - half), 1e-6)
+    for _ in range(newton_steps):  # on every pair: cheaper than picking the few inside
+        big = half + m
+        ua, ub = a4 / _pow4(big), b4 / _pow4(m)
+        m += (ua + ub - 1.0) / (4.0 * (ua / big + ub / m))
+    return np.where(inside, np.minimum(m, margin_m), margin_m).min(axis=1)
+
+
+def _pow4(x):
+    x2 = x * x
+    return x2 * x2
+
+
+def forced_slack_at(points: np.ndarray, headings: np.ndarray, segments: np.ndarray,
+                    margin_m: float, slack_min_m: float) -> np.ndarray:
+    """The slack (n,) a hull circle needs at the best place across the path through each point:
+    midway between the walls abeam, the OCP's super-ellipses (not the distance: near a steep
+    segment's ends the power-4 shape reaches up to about 0.6 m further) allow it a separation
+    m'; the slack is m' - margin_m, clipped to [slack_min_m, 0]. 0 where a side is open."""
+    points = np.asarray(points, float).reshape(-1, 2)
+    out = np.zeros(len(points))
+    if len(segments) == 0:
+        return out
+    frames = _Frames(points, np.asarray(headings, float), segments)
+    port, starboard = frames.walls_abeam()
+    # a super-ellipse reaches at most 0.2 m' beyond the distance (its corners)
+    near = port + starboard < 2.5 * margin_m
+    if not near.any():
+        return out
+    shift = 0.5 * (starboard[near] - port[near])[:, None]  # to the middle, along the normal
+    allowed = separation_allowed(frames.along[near] + shift * frames.normal_along[near],
+                                 frames.across[near] + shift * frames.normal_across[near],
+                                 frames.half, margin_m)
+    out[near] = np.maximum(np.minimum(allowed - margin_m, 0.0), slack_min_m)
+    return out
+
+
+def forced_slack(path: WaypointPath, lo_m: np.ndarray, hi_m: np.ndarray, segments: np.ndarray,
+                 margin_m: float, slack_min_m: float, spacing_m: float = 1.0) -> np.ndarray:
+    """Per stage, the most negative forced slack (`forced_slack_at`) over the path's arc
+    lengths [lo_m, hi_m] (one interval a stage), sampled every `spacing_m`."""
+    lo = np.minimum(np.maximum(np.asarray(lo_m, float), 0.0), path.length)
+    hi = np.minimum(np.maximum(np.asarray(hi_m, float), lo), path.length)
+    out = np.zeros(len(lo))
+    if len(segments) == 0 or len(lo) == 0:
+        return out
+    start = float(lo.min())
+    count = int((float(hi.max()) - start) / spacing_m + 1.999999)
+    points, headings = path.at(start + spacing_m * np.arange(count))
+    forced = forced_slack_at(points, headings, segments, margin_m, slack_min_m)
+    if not forced.any():
+        return out
+    # each stage's samples: indices first..last (at least one), all inside the sampled range
+    first = np.minimum(np.ceil((lo - start) / spacing_m - 1e-9), count - 1).astype(int)
+    last = np.maximum(np.minimum(np.floor((hi - start) / spacing_m + 1e-9), count - 1)
+                      .astype(int), first)
+    idx = np.minimum(first[:, None] + np.arange(int((last - first).max()) + 1), last[:, None])
+    return forced[idx].min(axis=1)
