@@ -237,3 +237,38 @@ def clip_segments_to_circle(a, b, centre, radius_m: float) -> np.ndarray:
     dv = p1 - p0
     return np.column_stack([(p0 + p1) / 2.0, np.arctan2(dv[:, 1], dv[:, 0]),
                             np.hypot(*dv.T)]).reshape(-1, 4)
+
+
+def polygon_area(ring) -> float:
+    """Signed area of a polygon (K, 2), last point not repeated: > 0 when its vertices turn
+    from north toward east (clockwise on a map), < 0 the other way, 0 when they are collinear."""
+    p = np.asarray(ring, float).reshape(-1, 2)
+    q = np.roll(p, -1, axis=0)
+    return float(0.5 * np.sum(p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1]))
+
+
+def points_in_polygon(points, ring, boundary_m: float = 1e-9) -> np.ndarray:
+    """(N,) mask: each point lies strictly inside the polygon ring (K, 2), farther than
+    `boundary_m` from its edges. Even-odd rule; a point on the boundary is outside."""
+    p = np.asarray(points, float).reshape(-1, 2)
+    a = np.asarray(ring, float).reshape(-1, 2)
+    b = np.roll(a, -1, axis=0)
+    straddle = (a[None, :, 1] > p[:, None, 1]) != (b[None, :, 1] > p[:, None, 1])
+    dy = np.where(b[:, 1] != a[:, 1], b[:, 1] - a[:, 1], 1.0)
+    x_at = a[None, :, 0] + (p[:, None, 1] - a[None, :, 1]) * (b[:, 0] - a[:, 0]) / dy
+    inside = ((straddle & (p[:, None, 0] < x_at)).sum(axis=1) % 2) == 1
+    return inside & (point_segment_distance(p, a, b).min(axis=1) > boundary_m)
+
+
+def segments_touch(a1, b1, a2, b2, tol_m: float = 1e-9) -> np.ndarray:
+    """(N, M) mask: segment i of (a1, b1) and segment j of (a2, b2) have a point in common
+    (a proper crossing, or an end of one within `tol_m` of the other, collinear overlaps
+    included). Unlike `segments_cross`, a path through a wall's vertex counts."""
+    a1, b1 = np.asarray(a1, float).reshape(-1, 2), np.asarray(b1, float).reshape(-1, 2)
+    a2, b2 = np.asarray(a2, float).reshape(-1, 2), np.asarray(b2, float).reshape(-1, 2)
+    touch = segments_cross(a1, b1, a2, b2)
+    touch |= point_segment_distance(a1, a2, b2) <= tol_m
+    touch |= point_segment_distance(b1, a2, b2) <= tol_m
+    touch |= (point_segment_distance(a2, a1, b1) <= tol_m).T
+    touch |= (point_segment_distance(b2, a1, b1) <= tol_m).T
+    return touch

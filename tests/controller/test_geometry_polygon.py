@@ -1,0 +1,46 @@
+"""Polygon helpers of controller.geometry: area, point in polygon, touching segments."""
+
+import numpy as np
+import pytest
+
+from controller.geometry import points_in_polygon, polygon_area, segments_cross, segments_touch
+
+SQUARE = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
+
+
+def test_polygon_area_is_signed_and_zero_for_collinear_points():
+    assert polygon_area(SQUARE) == pytest.approx(100.0)  # north, then east: clockwise on a map
+    assert polygon_area(SQUARE[::-1]) == pytest.approx(-100.0)
+    assert polygon_area([[0, 0], [1, 1], [3, 3]]) == pytest.approx(0.0, abs=1e-12)
+    assert polygon_area([[0, 0], [4, 0], [0, 3]]) == pytest.approx(6.0)
+
+
+def test_points_on_the_boundary_or_outside_are_not_inside():
+    pts = [[5, 5], [0.001, 5], [0, 5], [10, 10], [5, 10], [11, 5], [-3, -3], [5, 10.5]]
+    assert points_in_polygon(pts, SQUARE).tolist() == [True, True, False, False, False, False,
+                                                        False, False]
+
+
+def test_points_in_a_non_convex_polygon():
+    u_shape = np.array([[0, 0], [10, 0], [10, 3], [2, 3], [2, 7], [10, 7], [10, 10], [0, 10]], float)
+    inside = points_in_polygon([[1, 5], [5, 5], [5, 1.5], [5, 8.5], [2, 5]], u_shape)
+    assert inside.tolist() == [True, False, True, True, False]
+
+
+def test_boundary_margin_widens_the_outside():
+    assert points_in_polygon([[5, 0.5]], SQUARE, boundary_m=1.0).tolist() == [False]
+    assert points_in_polygon([[5, 1.5]], SQUARE, boundary_m=1.0).tolist() == [True]
+
+
+def test_segments_touch_counts_vertices_and_overlaps_that_a_crossing_misses():
+    wall_a, wall_b = np.array([[0.0, 8.0], [2.0, 8.0]]), np.array([[2.0, 8.0], [4.0, 8.0]])
+    a1, b1 = np.array([[2.0, 0.0]]), np.array([[2.0, 20.0]])  # through the shared vertex
+    assert not segments_cross(a1, b1, np.vstack([wall_a[:1], wall_b[:1]]),
+                              np.vstack([wall_a[1:], wall_b[1:]])).any()
+    touch = segments_touch(a1, b1, np.vstack([wall_a[:1], wall_b[:1]]),
+                           np.vstack([wall_a[1:], wall_b[1:]]))
+    assert touch.shape == (1, 2) and touch.all()
+    # an end on the other segment, a collinear overlap, and two segments apart
+    assert segments_touch([[0, 0]], [[1, 8]], [[0, 8]], [[2, 8]]).tolist() == [[True]]
+    assert segments_touch([[1, 8]], [[3, 8]], [[0, 8]], [[2, 8]]).tolist() == [[True]]
+    assert segments_touch([[0, 0]], [[1, 7.9]], [[0, 8]], [[2, 8]]).tolist() == [[False]]
