@@ -272,3 +272,20 @@ def segments_touch(a1, b1, a2, b2, tol_m: float = 1e-9) -> np.ndarray:
     touch |= (point_segment_distance(a2, a1, b1) <= tol_m).T
     touch |= (point_segment_distance(b2, a1, b1) <= tol_m).T
     return touch
+
+
+def polyline_self_touch(points, tol_m: float = 1e-9, closed: bool = False) -> tuple[int, int] | None:
+    """Indices (i, j) of two non-adjacent legs of a polyline that cross or touch (a vertex on
+    another leg counts, unlike `self_intersection`), or None. `closed`: the last point is the
+    first one again, so the first and last legs are adjacent too. No repeated points expected."""
+    pts = np.asarray(points, float).reshape(-1, 2)
+    a, b = pts[:-1], pts[1:]
+    hits = segments_touch(a, b, a, b, tol_m)
+    k = np.arange(len(a))
+    hits &= np.abs(np.subtract.outer(k, k)) > 1
+    if closed and len(a) > 2:
+        hits[0, -1] = hits[-1, 0] = False
+    if not hits.any():
+        return None
+    i, j = np.argwhere(hits)[0]
+    return int(i), int(j)

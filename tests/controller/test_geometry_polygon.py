@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from controller.geometry import points_in_polygon, polygon_area, segments_cross, segments_touch
+from controller.geometry import (points_in_polygon, polygon_area, polyline_self_touch, segments_cross,
+                                 segments_touch, self_intersection)
 
 SQUARE = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
 
@@ -44,3 +45,16 @@ def test_segments_touch_counts_vertices_and_overlaps_that_a_crossing_misses():
     assert segments_touch([[0, 0]], [[1, 8]], [[0, 8]], [[2, 8]]).tolist() == [[True]]
     assert segments_touch([[1, 8]], [[3, 8]], [[0, 8]], [[2, 8]]).tolist() == [[True]]
     assert segments_touch([[0, 0]], [[1, 7.9]], [[0, 8]], [[2, 8]]).tolist() == [[False]]
+
+
+def test_polyline_self_touch_finds_a_loop_through_a_vertex():
+    # the fourth leg ends on the first leg's end vertex: no proper crossing, but a loop
+    loop = [[0, 0], [10, 0], [10, 10], [20, 10], [10, 0]]
+    assert polyline_self_touch(loop) is not None
+    through = [[0, 0], [10, 0], [20, 0], [20, 10], [10, 10], [10, -10]]  # through vertex (10, 0)
+    assert self_intersection(through) is None
+    assert polyline_self_touch(through) == (0, 4)
+    assert polyline_self_touch([[0, 0], [10, 0], [10, 10], [0, 10]]) is None
+    square = [[0, 0], [10, 0], [10, 10], [0, 10], [0, 0]]
+    assert polyline_self_touch(square, closed=True) is None
+    assert polyline_self_touch(square) == (0, 3)
