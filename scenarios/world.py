@@ -11,32 +11,49 @@ LiDAR simulator renders them and the metrics measure clearance against them.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
 from controller.errors import InputError
 from controller.geometry import (Polyline, clip_segments_to_circle, offset_polyline,
-                                 point_segment_distance, segments_cross, self_intersection,
-                                 wrap_angle)
+                                 point_segment_distance, points_in_polygon, polygon_area,
+                                 polyline_self_touch, segments_cross, segments_touch, wrap_angle)
 
 LAND_SIDES = ("left", "right")
 OBSTACLE_KINDS = ("pier", "boat", "bridge", "other")
+ON_WALL_M = 1e-6  # a point this close to a wall is on it, not on the water
 
 
-def _as_points(value, what: str, closed_min: int = 2) -> np.ndarray:
-    """A finite (K, 2) float array, read-only, or an InputError naming `what`."""
+class WorldError(InputError):
+    """Bad geometry of one part of the world, kept apart as `owner` ("wall 'quay'"), `key`
+    (the argument, e.g. "points") and `detail`, so a file loader can name its own field.
+    `walls` holds the indices of the walls involved, if any."""
+
+    def __init__(self, owner: str, key: str, detail: str, walls: tuple[int, ...] = ()):
+        super().__init__(f"{owner}: {key}: {detail}")
+        self.owner, self.key, self.detail, self.walls = owner, key, detail, walls
+
+
+def _as_points(value, owner: str, key: str, closed_min: int = 2) -> np.ndarray:
+    """A finite (K, 2) float array, read-only, or a WorldError naming `owner` and `key`."""
+    def bad(detail):
+        return WorldError(owner, key, detail)
+
     try:
         pts = np.array(value, dtype=float)
     except (TypeError, ValueError):
-        raise InputError(f"{what}: expected a list of [x, y] points in metres") from None
+        raise bad("expected a list of [x, y] points in metres") from None
     if pts.ndim != 2 or pts.shape[1] != 2:
-        raise InputError(f"{what}: expected a list of [x, y] points, got shape {pts.shape}")
+        raise bad(f"expected a list of [x, y] points, got shape {pts.shape}")
     if len(pts) < closed_min:
-        raise InputError(f"{what}: needs at least {closed_min} points, got {len(pts)}")
+        raise bad(f"needs at least {closed_min} points, got {len(pts)}")
     if not np.all(np.isfinite(pts)):
-        raise InputError(f"{what}: point {int(np.argmin(np.isfinite(pts).all(1)))} is not finite")
-    if np.any(np.hypot(*np.diff(pts, axis=0).T) <= 0.0):
-        raise InputError(f"{what}: repeated point at index {int(np.argmin(np.hypot(*np.diff(pts, axis=0).T)))}")
+        raise bad(f"point {int(np.argmin(np.isfinite(pts).all(1)))} is not finite")
+    step = np.hypot(*np.diff(pts, axis=0).T)
+    if np.any(step <= 0.0):
+        i = int(np.argmin(step))
+        raise bad(f"repeated point at index {i + 1} ({pts[i, 0]:g}, {pts[i, 1]:g})")
     pts.setflags(write=False)
     return pts
 
@@ -66,15 +83,16 @@ class Wall:
 
     def __post_init__(self) -> None:
         what = f"wall {self.name!r}"
-        object.__setattr__(self, "points", _as_points(self.points, f"{what}: points"))
+        object.__setattr__(self, "points", _as_points(self.points, what, "points"))
         _check_number(self.height_m, f"{what}: height_m", 0.0, strict=True)
         _check_number(self.setback_m, f"{what}: setback_m", 0.0, strict=True)
         _check_number(self.backdrop_height_m, f"{what}: backdrop_height_m", 0.0)
         if self.land_side not in LAND_SIDES:
             raise InputError(f"{what}: land_side must be 'left' or 'right', got {self.land_side!r}")
-        crossing = self_intersection(self.points)
+        closed = len(self.points) > 3 and np.allclose(self.points[0], self.points[-1])
+        crossing = polyline_self_touch(self.points, ON_WALL_M, closed=closed)
         if crossing is not None:
-            raise InputError(f"{what}: points: the wall crosses itself (legs {crossing[0]} "
+            raise WorldError(what, "points", f"the wall crosses itself (legs {crossing[0]} "
                              f"and {crossing[1]})")
 
     @property
@@ -106,7 +124,7 @@ class Obstacle:
 
     def __post_init__(self) -> None:
         what = f"obstacle {self.name!r}"
-        pts = _as_points(self.outline, f"{what}: outline", closed_min=3)
+        pts = _as_points(self.outline, what, "outline", closed_min=3)
         if np.allclose(pts[0], pts[-1]):
             pts = pts[:-1]
             pts.setflags(write=False)
@@ -119,9 +137,11 @@ class Obstacle:
         if self.kind not in OBSTACLE_KINDS:
             raise InputError(f"{what}: kind must be one of {', '.join(OBSTACLE_KINDS)}, "
                              f"got {self.kind!r}")
-        crossing = self_intersection(self.closed)
+        crossing = polyline_self_touch(self.closed, ON_WALL_M, closed=True)
         if crossing is not None:
-            raise InputError(f"{what}: outline crosses itself (legs {crossing[0]} and {crossing[1]})")
+            raise WorldError(what, "outline", f"crosses itself (legs {crossing[0]} and {crossing[1]})")
+        if abs(polygon_area(self.outline)) < 1e-6:
+            raise WorldError(what, "outline", "encloses no area (its points lie on one line)")
 
     @property
     def closed(self) -> np.ndarray:
@@ -155,7 +175,13 @@ class CanalWorld:
             raise InputError(f"canal {self.name!r}: walls: at least one wall is needed")
         if self.centre_line is not None:
             object.__setattr__(
-                self, "centre_line", _as_points(self.centre_line, f"canal {self.name!r}: centre_line"))
+                self, "centre_line", _as_points(self.centre_line, f"canal {self.name!r}", "centre_line"))
+        crossing = walls_crossing(self.walls)
+        if crossing is not None:
+            i, j, leg_i, leg_j = crossing
+            raise WorldError(f"canal {self.name!r}", "walls",
+                             f"walls {self.walls[i].name!r} and {self.walls[j].name!r} cross each "
+                             f"other (their legs {leg_i} and {leg_j})", walls=(i, j))
         object.__setattr__(self, "edges", self._edge_tables())
 
     # -- construction -------------------------------------------------------------------
@@ -168,9 +194,13 @@ class CanalWorld:
         interpolated over the arc length s of the centre line (held constant past its ends).
         Height, setback and backdrop are a number (both banks) or a (left, right) pair.
         """
-        centre = _as_points(centre_line, f"canal {name!r}: centre_line")
+        centre = _as_points(centre_line, f"canal {name!r}", "centre_line")
         s = Polyline(centre).cumulative
         width = _width_profile(width_m, s, f"canal {name!r}: width_m")
+        faces = [offset_polyline(centre, sign * width / 2.0) for sign in (-1.0, 1.0)]
+        fold = _offset_fold(centre, width, faces)
+        if fold is not None:
+            raise WorldError(f"canal {name!r}", "centre_line", fold)
 
         def side(value, i, what):
             v = value[i] if isinstance(value, (tuple, list)) else value
@@ -178,11 +208,10 @@ class CanalWorld:
             return float(v)
 
         walls = tuple(
-            Wall(offset_polyline(centre, sign * width / 2.0),
-                 height_m=side(wall_height_m, i, "wall_height_m"), land_side=land,
+            Wall(face, height_m=side(wall_height_m, i, "wall_height_m"), land_side=land,
                  setback_m=side(setback_m, i, "setback_m"),
                  backdrop_height_m=side(backdrop_height_m, i, "backdrop_height_m"), name=land)
-            for i, (sign, land) in enumerate(((-1.0, "left"), (1.0, "right")))
+            for i, (face, land) in enumerate(zip(faces, ("left", "right")))
         )
         return cls(walls, tuple(obstacles), centre, name)
 
@@ -192,6 +221,67 @@ class CanalWorld:
         return cls(tuple(walls), tuple(obstacles), centre_line, name)
 
     # -- queries ------------------------------------------------------------------------
+    @cached_property
+    def water_ring(self) -> np.ndarray | None:
+        """The water as one polygon (K, 2): two walls joined at their ends, the joins being the
+        canal's open ends. None when there are not exactly two walls or the ring crosses itself."""
+        if len(self.walls) != 2:
+            return None
+        a, b = self.walls[0].points, self.walls[1].points
+        ends_near = np.hypot(*(a[-1] - b[-1])) + np.hypot(*(b[0] - a[0]))
+        ends_far = np.hypot(*(a[-1] - b[0])) + np.hypot(*(b[-1] - a[0]))
+        ring = np.vstack([a, b[::-1] if ends_near <= ends_far else b])
+        keep = np.hypot(*(ring - np.roll(ring, 1, axis=0)).T) > ON_WALL_M  # walls that meet
+        ring = ring[keep]
+        if len(ring) < 3 or polyline_self_touch(np.vstack([ring, ring[:1]]), ON_WALL_M, closed=True):
+            return None
+        return ring
+
+    def off_water(self, points) -> list[str | None]:
+        """For each (x, y) point: None if it lies on the open water, else why not ("outside
+        the canal", "on wall 'left'", "inside obstacle 'pier'"). Bridges do not count.
+
+        With two walls the water is `water_ring`: a point on a wall is off the water, a point
+        on an open end is on it. Otherwise the way from the nearest centre-line point must not
+        touch a wall, nor pass the centre line's ends; with neither, only walls and obstacles
+        under the point are found.
+        """
+        pts = np.asarray(points, float).reshape(-1, 2)
+        reasons: list[str | None] = [None] * len(pts)
+        a, b = polyline_legs(self.wall_polylines())
+        owner = np.concatenate([np.full(len(w.points) - 1, i) for i, w in enumerate(self.walls)])
+        dist = point_segment_distance(pts, a, b)
+        ring = self.water_ring
+        if ring is not None:
+            k = len(self.walls[0].points)
+            ends_a, ends_b = ring[[k - 1, -1]], ring[[k, 0]]
+            at_end = point_segment_distance(pts, ends_a, ends_b).min(axis=1) <= ON_WALL_M
+            inside = points_in_polygon(pts, ring, ON_WALL_M) | at_end
+        else:
+            inside = np.array([self._reachable_from_centre_line(p, a, b) for p in pts], bool)
+        for n, p in enumerate(pts):
+            hit = [o for o in self.obstacles if o.z_bottom_m == 0 and o.contains(p)[0]]
+            if dist[n].min() <= ON_WALL_M:
+                reasons[n] = f"on wall {self.walls[owner[int(np.argmin(dist[n]))]].name!r}"
+            elif not inside[n]:
+                reasons[n] = "outside the canal"
+            elif hit:
+                reasons[n] = f"inside obstacle {hit[0].name!r}"
+        return reasons
+
+    def _reachable_from_centre_line(self, p, a, b) -> bool:
+        """No wall touches the way from the nearest centre-line point to p, and p is not past
+        the centre line's ends (True when there is no centre line to go by)."""
+        if self.centre_line is None:
+            return True
+        line = Polyline(self.centre_line)
+        s, foot, dist, leg = line.project(p)
+        d = self.centre_line[leg + 1] - self.centre_line[leg]
+        along = float((p - foot) @ d) / float(np.hypot(*d))
+        if (s <= 0.0 and along < -ON_WALL_M) or (s >= line.length and along > ON_WALL_M):
+            return False
+        return dist <= ON_WALL_M or not segments_touch(foot, p, a, b).any()
+
     def wall_polylines(self) -> list[np.ndarray]:
         """The true wall faces, (K, 2) each: the ground truth for clearance metrics."""
         return [w.points for w in self.walls]
@@ -307,6 +397,58 @@ class CanalWorld:
                          np.array([o.z_bottom_m for o in self.obstacles]),
                          np.array([o.z_top_m for o in self.obstacles])),
         }
+
+
+def polyline_legs(lines) -> tuple[np.ndarray, np.ndarray]:
+    """All legs of several polylines as two (M, 2) endpoint arrays a, b."""
+    return np.vstack([p[:-1] for p in lines]), np.vstack([p[1:] for p in lines])
+
+
+def walls_crossing(walls) -> tuple[int, int, int, int] | None:
+    """(i, j, leg of i, leg of j) of the first two different walls that cross or touch, or
+    None. Walls may meet at their ends (a bank made of pieces, a wall ending on another);
+    a crossing through a vertex counts."""
+    for i in range(len(walls)):
+        for j in range(i + 1, len(walls)):
+            p, q = walls[i].points, walls[j].points
+            hits = segments_cross(p[:-1], p[1:], q[:-1], q[1:])
+            on_q = point_segment_distance(p[1:-1], q[:-1], q[1:]) <= ON_WALL_M  # inner vertices
+            on_p = point_segment_distance(q[1:-1], p[:-1], p[1:]) <= ON_WALL_M
+            hits[1:, :] |= on_q
+            hits[:, 1:] |= on_p.T
+            if hits.any():
+                leg_i, leg_j = np.argwhere(hits)[0]
+                return i, j, int(leg_i), int(leg_j)
+    return None
+
+
+def _offset_fold(centre: np.ndarray, width: np.ndarray, faces) -> str | None:
+    """Why the walls offset by half the width from a centre line fold, or None. They fold
+    where a bend is tighter than the offset (a wall leg then runs backwards), and cross where
+    the canal comes back within its width of itself."""
+    s = Polyline(centre).cumulative
+    ahead = np.diff(centre, axis=0)
+    fix = ("round the bend wider (corner_radius_m), move the centre line apart (centre_line) "
+           "or make the canal narrower (width_m / width_profile)")
+    for face, side in zip(faces, ("left", "right")):
+        back = np.flatnonzero(np.einsum("ij,ij->i", np.diff(face, axis=0), ahead) <= 0.0)
+        if len(back):
+            k = int(back[0])
+            return (f"the {side} wall folds back on itself near s = {s[k]:.0f} m along the "
+                    f"centre line: a bend there is tighter than half the width "
+                    f"({width[k] / 2:.1f} m); {fix}")
+        crossing = polyline_self_touch(face, ON_WALL_M)
+        if crossing is not None:
+            k = crossing[0]
+            return (f"the {side} wall crosses itself near s = {s[k]:.0f} m along the centre "
+                    f"line: a bend or U-turn there is tighter than half the width, or the "
+                    f"canal comes back within its width of itself; {fix}")
+    hits = segments_touch(faces[0][:-1], faces[0][1:], faces[1][:-1], faces[1][1:], ON_WALL_M)
+    if hits.any():
+        k = int(np.argwhere(hits)[0][0])
+        return (f"the left and right walls cross near s = {s[k]:.0f} m along the centre line: "
+                f"the canal comes back within its width of itself; {fix}")
+    return None
 
 
 def _width_profile(width_m, s: np.ndarray, what: str) -> np.ndarray:

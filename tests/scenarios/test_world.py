@@ -128,7 +128,9 @@ def test_bad_wall_fields_are_named(kw, match):
     ({"z_top_m": 1.0, "z_bottom_m": 2.0}, "z_top_m .* must be above z_bottom_m"),
     ({"kind": "whale"}, "kind must be one of"),
     ({"outline": [[0, 0], [1, 0]]}, "at least 3 points"),
-    ({"outline": [[0, 0], [2, 2], [2, 0], [0, 2]]}, "outline crosses itself"),
+    ({"outline": [[0, 0], [2, 2], [2, 0], [0, 2]]}, r"obstacle 'p': outline: crosses itself"),
+    ({"outline": [[0, 0], [1, 1], [3, 3]]}, r"obstacle 'p': outline: encloses no area"),
+    ({"outline": [[0, 0], [2, 0], [0, 0]]}, r"obstacle 'p': outline: encloses no area"),
 ])
 def test_bad_obstacle_fields_are_named(kw, match):
     args = {"outline": [[0, 0], [2, 0], [2, 2], [0, 2]], "name": "p", **kw}
@@ -142,6 +144,101 @@ def test_bad_width_profile_is_named():
         CanalWorld.from_centre_line(centre, [[50, 10], [10, 12]])
     with pytest.raises(InputError, match="width_m"):
         CanalWorld.from_centre_line(centre, -3.0)
+
+
+def test_two_walls_that_cross_each_other_are_named():
+    west = Wall([[0, -5], [50, -5], [100, 8]], name="west quay")
+    east = Wall([[0, 5], [100, 5]], land_side="right", name="east quay")
+    with pytest.raises(InputError, match=r"walls 'west quay' and 'east quay' cross each other "
+                                         r"\(their legs 1 and 0\)") as err:
+        CanalWorld.from_walls([west, east])
+    assert err.value.walls == (0, 1) and err.value.key == "walls"
+
+
+def test_walls_crossing_through_a_vertex_and_a_wall_touching_itself_are_errors():
+    west = Wall([[0, -5], [50, 5], [100, 10]], name="west")  # its vertex lies on the east wall
+    east = Wall([[0, 5], [100, 5]], land_side="right", name="east")
+    with pytest.raises(InputError, match="walls 'west' and 'east' cross each other"):
+        CanalWorld.from_walls([west, east])
+    with pytest.raises(InputError, match=r"wall 'loop': points: the wall crosses itself \(legs 0 and 4\)"):
+        Wall([[0, 0], [10, 0], [20, 0], [20, 10], [10, 10], [10, -10]], name="loop")
+
+
+def test_walls_meeting_end_to_end_are_not_a_crossing():
+    a = Wall([[0, -5], [50, -5]], name="a")
+    b = Wall([[50, -5], [100, -6]], name="b")
+    c = Wall([[0, 5], [100, 5]], land_side="right", name="c")
+    d = Wall([[30, 5], [30, 9]], land_side="right", name="d")  # ends on c: a side quay
+    assert len(CanalWorld.from_walls([a, b, c, d]).walls) == 4
+
+
+@pytest.mark.parametrize("centre, width, words", [
+    # a sharp 90-degree corner resampled every 2 m: the inner wall runs back at the corner
+    (np.vstack([np.column_stack([np.arange(0, 101, 2.0), np.zeros(51)]),
+                np.column_stack([np.full(50, 100.0), np.arange(2, 101, 2.0)])]), 16.0,
+     ["right wall folds back", "s = 98 m", "half the width (8.0 m)", "corner_radius_m"]),
+    # a U-turn of radius 5 m in a 16 m canal: north along y = 0, back south along y = 10
+    (np.vstack([np.column_stack([np.linspace(0, 50, 26), np.zeros(26)]),
+                np.column_stack([50 + 5 * np.cos(np.linspace(-np.pi / 2, np.pi / 2, 17)[1:-1]),
+                                 5 + 5 * np.sin(np.linspace(-np.pi / 2, np.pi / 2, 17)[1:-1])]),
+                np.column_stack([np.linspace(50, 0, 26), np.full(26, 10.0)])]), 16.0,
+     ["right wall folds back", "near s = 50 m", "width_m / width_profile"]),
+])
+def test_offset_walls_that_fold_at_a_tight_bend_are_an_error(centre, width, words):
+    with pytest.raises(InputError) as err:
+        CanalWorld.from_centre_line(centre, width, name="tight")
+    msg = str(err.value)
+    assert msg.startswith("canal 'tight': centre_line: ") and err.value.key == "centre_line"
+    for w in words:
+        assert w in msg, msg
+
+
+def test_a_canal_coming_back_within_its_width_has_crossing_walls():
+    # north to (0, 0), a starboard loop of radius 30 m, then west across the first straight
+    phi = np.linspace(0, 1.5 * np.pi, 120)[1:]
+    centre = np.vstack([np.column_stack([np.linspace(-60, 0, 31), np.zeros(31)]),
+                        np.column_stack([30 * np.sin(phi), 30 - 30 * np.cos(phi)]),
+                        np.column_stack([np.full(25, -30.0), np.linspace(28, -20, 25)])])
+    with pytest.raises(InputError, match="cross") as err:
+        CanalWorld.from_centre_line(centre, 12.0)
+    assert err.value.key == "centre_line"
+
+
+def test_a_gentle_bend_does_not_fold():
+    arc = np.linspace(0, np.pi / 2, 60)
+    centre = np.column_stack([40 * np.sin(arc), 40 * (1 - np.cos(arc))])
+    assert len(CanalWorld.from_centre_line(centre, 16.0).walls) == 2
+
+
+def test_off_water_in_a_straight_canal():
+    pier = Obstacle([[30, -8], [34, -8], [34, -5], [30, -5]], name="pier")
+    world = straight(16.0, obstacles=(pier,))
+    reasons = world.off_water([[50, 0], [50, 20], [50, 8], [0, 0], [0, 7.9], [300, 0],
+                               [-200, 0], [32, -6], [100, 0], [0, 9]])
+    assert reasons == [None, "outside the canal", "on wall 'right'", None, None,
+                       "outside the canal", "outside the canal", "inside obstacle 'pier'", None,
+                       "outside the canal"]
+
+
+def test_off_water_with_two_explicit_walls_in_either_direction():
+    west = Wall([[0, -8], [100, -8]], name="west")
+    east = Wall([[100, 8], [0, 8]], land_side="left", name="east")  # drawn the other way
+    world = CanalWorld.from_walls([west, east])
+    assert world.water_ring is not None and len(world.water_ring) == 4
+    assert world.off_water([[50, 0], [50, 10], [150, 0], [50, -8]]) == [
+        None, "outside the canal", "outside the canal", "on wall 'west'"]
+
+
+def test_off_water_without_a_water_ring_goes_from_the_centre_line():
+    # three walls: the east bank in two pieces
+    west = Wall([[0, -8], [100, -8]], name="west")
+    east1 = Wall([[0, 8], [50, 8]], land_side="right", name="east 1")
+    east2 = Wall([[50, 8], [100, 8]], land_side="right", name="east 2")
+    world = CanalWorld.from_walls([west, east1, east2], centre_line=[[0, 0], [100, 0]])
+    assert world.water_ring is None
+    # through the vertex where the two pieces meet, through a resampled vertex, past the end
+    assert world.off_water([[50, 20], [50, 0], [20, 3], [300, 0], [-5, 0]]) == [
+        "outside the canal", None, None, "outside the canal", "outside the canal"]
 
 
 def test_a_world_needs_a_wall():
