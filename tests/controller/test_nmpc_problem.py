@@ -8,7 +8,7 @@ import pytest
 
 from controller.errors import InputError
 from controller.nmpc import NmpcConfig, build_ocp, clearance_function, pack_params
-from controller.segment_slots import check_segments, fill_segment_slots
+from controller.segment_slots import check_segments, fill_segment_slots, select_segments
 
 
 @pytest.fixture(scope="module")
@@ -52,6 +52,25 @@ def test_slots_hold_the_nearest_segments_then_inactive_padding():
     many = np.column_stack([np.zeros(20), np.arange(20.0) + 1, np.zeros(20), np.ones(20)])
     assert fill_segment_slots(many, [0, 0], n_slots=16)[:, 1].tolist() == list(range(1, 17))
     assert fill_segment_slots(np.zeros((0, 4)), [0, 0], n_slots=3).sum() == 0
+
+
+def test_slots_prefer_the_walls_along_the_planned_path_to_those_behind():
+    """Wall pieces every 10 m from 60 m behind to 50 m ahead, both sides of a canal heading
+    north: ranked by distance to the planned path (50 m ahead), the slots keep the pieces
+    alongside the plan and drop those behind the stern; the step says what it dropped."""
+    x = np.arange(-55.0, 50.0, 10.0)
+    segs = np.vstack([np.column_stack([x, np.full(len(x), side), np.zeros(len(x)),
+                                       np.full(len(x), 10.0)]) for side in (-8.0, 8.0)])
+    plan = np.column_stack([np.linspace(0.0, 50.0, 26), np.zeros(26)])
+    sel = select_segments(segs, [0, 0], n_slots=10, range_m=60.0, path=plan)
+    kept = sel.slots[sel.slots[:, 4] > 0]
+    # alongside the plan, nearer the boat first: the pieces centred at -5 .. 35 m each side
+    assert sorted(kept[:, 0].tolist()) == sorted([-5.0, 5.0, 15.0, 25.0, 35.0] * 2)
+    assert sel.dropped == len(segs) - 10
+    assert sel.dropped_nearest_m == pytest.approx(8.0)  # the 45 m pieces alongside, left out
+    by_boat = select_segments(segs, [0, 0], n_slots=10, range_m=60.0)
+    assert by_boat.slots[:, 0].min() < -10.0  # ranked from the boat: pieces behind the stern
+    assert select_segments(segs[:4], [0, 0], n_slots=10, path=plan).dropped == 0
 
 
 @pytest.mark.parametrize("segments, words", [
@@ -115,3 +134,21 @@ def test_assembled_jacobian_equals_casadis(ocp):
     assert np.allclose(g, np.asarray(g_ref).ravel(), atol=1e-12)
     J = ca.DM(ocp.jac_sparsity, jac_nz)
     assert float(ca.mmax(ca.fabs(J - J_ref))) < 1e-9
+
+
+def test_the_ocps_dynamics_are_the_smooth_models_rk4(ocp):
+    """f_d is the one model's smooth variant, RK4 in the configured sub-steps over Ts; the
+    actuator states integrate the rates, and the next slack is the input sigma."""
+    from controller.model import Variant, step_function
+
+    cfg = ocp.config
+    boat = step_function(cfg.step_s, cfg.rk4_substeps, Variant(smooth=True, eps=cfg.smooth_eps))
+    p = cfg.boat.as_vector()
+    x = np.array([3.0, -2.0, 0.3, 1.8, 0.05, -0.02, 42.0, 15.0, -0.4])
+    held = np.asarray(ocp.dynamics(x, [0.0, 0.0, -0.7], p, [0.2, -0.1])).ravel()
+    ref = np.asarray(boat(x[:6], x[6:8], p, [0.2, -0.1])).ravel()
+    assert np.allclose(held[:6], ref, rtol=0, atol=1e-12)
+    assert held[6:8].tolist() == [42.0, 15.0] and held[8] == -0.7
+    moved = np.asarray(ocp.dynamics(x, [3.0, -5.0, 0.0], p, [0.0, 0.0])).ravel()
+    assert np.allclose(moved[6:8], [45.0, 10.0])
+    assert not np.allclose(moved[:6], held[:6])  # the moving actuators act within the step
