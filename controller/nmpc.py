@@ -39,6 +39,7 @@ slots) is fixed when the problem is built.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field, fields
 
 import casadi as ca
@@ -90,10 +91,14 @@ class NmpcConfig:
 
         for f in fields(self):
             value = getattr(self, f.name)
+            if isinstance(value, (list, np.ndarray)):  # weights given as a list or an array
+                value = tuple(np.asarray(value).reshape(-1).tolist())
+                object.__setattr__(self, f.name, value)
             values = value if isinstance(value, tuple) else (value,)
             if f.name in ("boat", "terminal_factor") or value is None:
                 continue
-            if any(not isinstance(v, (int, float)) or isinstance(v, bool) for v in values):
+            if any(not isinstance(v, numbers.Real) or isinstance(v, (bool, np.bool_))
+                   for v in values):
                 bad(f.name, "expected numbers")
             if any(not math.isfinite(v) for v in values):
                 bad(f.name, "must be finite")

@@ -22,7 +22,7 @@ from .geometry import unwrap_near
 from .nmpc import NU, NX, NX_BOAT, NmpcConfig, ParamLayout, build_ocp, pack_params
 from .reference import Reference, WaypointPath, reference_trajectory, waypoint_path
 from .rti import QpOptions, QpStep, SqpResult, sqp
-from .segment_slots import SLOT_FIELDS, fill_segment_slots
+from .segment_slots import SLOT_FIELDS, select_segments
 from .slack_reference import forced_slack
 
 METHODS = ("rti", "sqp", "ipopt")
@@ -36,7 +36,7 @@ class SolverStats:
     ok: bool  # the plan is a fresh solution (False: a fallback plan was used)
     converged: bool  # SQP/IPOPT reached their tolerance (RTI: False by design)
     status: str
-    fallback: str  # "", "safe_guess" (retry succeeded) or "shifted_plan"
+    fallback: str  # "", "safe_guess" (retry succeeded), "shifted_plan" or "hold" (no plan yet)
     sqp_iterations: int
     qp_iterations: int
     consecutive_failures: int
@@ -44,6 +44,9 @@ class SolverStats:
     time_linearisation_s: float
     time_qp_s: float
     cpu_time_s: float  # this thread's CPU time for the step: the wall time less preemption
+    segments_dropped: int = 0  # segments within range that found no slot
+    dropped_nearest_m: float = float("inf")  # the closest of those to the planned path
+    command_clipped: bool = False  # the plan's first move had to be cut to the bounds (> 1e-6)
 
     @property
     def time_glue_s(self) -> float:
@@ -78,14 +81,33 @@ def steady_throttle(speed_mps, boat) -> np.ndarray:
 
 def _finite_vector(value, size: int, what: str) -> np.ndarray:
     try:
-        arr = np.asarray(value, float).reshape(-1)
+        arr = np.asarray(value, float)
     except (TypeError, ValueError):
         raise InputError(f"{what}: expected {size} numbers, got {value!r}") from None
-    if arr.size != size:
-        raise InputError(f"{what}: expected {size} numbers, got {arr.size}")
+    if arr.ndim > 1:
+        arr = arr.squeeze()
+    if arr.ndim != 1 or arr.size != size:
+        raise InputError(f"{what}: expected {size} numbers, got shape {np.shape(value)}")
     if not np.isfinite(arr).all():
         raise InputError(f"{what}: contains NaN or infinity: {arr.tolist()}")
     return arr
+
+
+def _number(value, what: str) -> float:
+    """A finite real number, or an InputError naming `what`."""
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{what}: expected a number, got {value!r}") from None
+    if not np.isfinite(x):
+        raise InputError(f"{what}: must be finite, got {value!r}")
+    return x
+
+
+def top_speed_mps(boat) -> float:
+    """Steady surge speed at 100 % throttle in still water (c_eff 100^2 = drag)."""
+    a, b, f = -boat.Xuu, -boat.Xu, boat.c_eff * 100.0**2
+    return float((-b + np.sqrt(b * b + 4 * a * f)) / (2 * a)) if a > 0 else f / max(b, 1e-9)
 
 
 class NmpcController:
@@ -109,6 +131,8 @@ class NmpcController:
         self._params = pack_params(config, np.zeros((config.segment_slots, len(SLOT_FIELDS))))
         self._lbw, self._ubw = self.ocp.bounds(np.zeros(NX_BOAT))
         self._x0_at = self.ocp.states_at[0]
+        self._xy_at = self.ocp.states_at[:, :2]
+        self._top_speed = top_speed_mps(config.boat)
         self.compiled_info = None
         if method == "ipopt":
             from .ipopt import IpoptSolver
@@ -127,6 +151,7 @@ class NmpcController:
     def reset(self) -> None:
         """Forget the plan, the progress along the path and the failure count."""
         self._plan: np.ndarray | None = None
+        self._solved = False  # a plan came from a successful solve since the reset
         self._progress_m = 0.0
         self._path: WaypointPath | None = None
         self._waypoints_given: np.ndarray | None = None
@@ -150,23 +175,29 @@ class NmpcController:
         act = np.clip(act, [-c.nT_max, -c.nS_max], [c.nT_max, c.nS_max])
         current = _finite_vector(current, 2, "current [north, east]")
         self._set_path(waypoints)
-
-        elapsed = c.control_period_s if elapsed_s is None else float(elapsed_s)
-        if not (np.isfinite(elapsed) and elapsed >= 0):
-            raise InputError(f"elapsed_s: must be a non-negative number of s, got {elapsed_s!r}")
+        speed = _number(target_speed_mps, "target_speed_mps")
+        if not 0.0 <= speed <= self._top_speed:
+            raise InputError(f"target_speed_mps: must lie in [0, {self._top_speed:.2f}] m/s "
+                             f"(the boat's top speed at 100 % throttle), got {speed:g}")
+        elapsed = c.control_period_s if elapsed_s is None else _number(elapsed_s, "elapsed_s")
+        if elapsed < 0:
+            raise InputError(f"elapsed_s: must be a non-negative number of s, got {elapsed:g}")
         guess = self._shifted_plan(elapsed)
         if guess is not None:
             x[2] = float(unwrap_near(x[2], guess[self.ocp.state_index(0)][2]))
-        reference = reference_trajectory(self._path, x[:2], x[2], target_speed_mps, c.horizon,
+        reference = reference_trajectory(self._path, x[:2], x[2], speed, c.horizon,
                                          c.step_s, self._progress_m, self.search_ahead_m)
-        slots = fill_segment_slots(segments, x[:2], c.segment_slots, c.segment_range_m)
+        planned = reference.states[:, :2] if guess is None else guess[self._xy_at]
+        selection = select_segments(segments, x[:2], c.segment_slots, c.segment_range_m,
+                                    planned)
+        slots = selection.slots
         p = self._params.copy()
         p[self._layout.current] = current
         p[self._layout.segments] = slots.ravel()
         x_init = np.concatenate([x, act])
         lbw, ubw = self._lbw.copy(), self._ubw.copy()
         lbw[self._x0_at] = ubw[self._x0_at] = np.concatenate([x_init, [0.0]])
-        slack_ref = self._slack_reference(reference, target_speed_mps, guess, x[:2], slots)
+        slack_ref = self._slack_reference(reference, speed, guess, x[:2], slots)
         w_ref = np.zeros(self.ocp.nw)
         w_ref[self.ocp.states_at[:, :NX_BOAT]] = reference.states
         w_ref[self.ocp.states_at[1:, NX - 1]] = slack_ref
@@ -184,6 +215,7 @@ class NmpcController:
                 fallback = "safe_guess" if retry.ok else ""
         if result.ok:
             self.consecutive_failures = 0
+            self._solved = True
             plan = result.w
         else:
             self.consecutive_failures += 1
@@ -192,11 +224,13 @@ class NmpcController:
                 raise SolverError(
                     f"NMPC ({self.method}) failed {self.consecutive_failures} steps in a row "
                     f"(last: {result.status}); stop the boat")
-            fallback = "shifted_plan"
-            plan = self._start_at(guess, x_init)
+            if not self._solved:  # no solved plan yet to follow: hold the actuators
+                fallback, plan = "hold", self._hold(guess, x_init)
+            else:
+                fallback, plan = "shifted_plan", self._start_at(guess, x_init)
         self._plan = plan
         self._progress_m = reference.progress_m
-        return self._output(plan, act, reference, result, fallback, t0)
+        return self._output(plan, act, reference, result, fallback, t0, selection)
 
     # -- pieces -----------------------------------------------------------------------------
     def _set_path(self, waypoints) -> None:
@@ -255,6 +289,14 @@ class NmpcController:
         shifted_inputs = inputs[j] + g * (inputs[j + 1] - inputs[j])
         return self.ocp.pack(shifted_states, shifted_inputs)
 
+    def _hold(self, guess: np.ndarray, x_init: np.ndarray) -> np.ndarray:
+        """An unsolved guess with the actuators held where they are (all rates 0): what a
+        controller with no solved plan yet may send while it retries."""
+        states, inputs = self.ocp.unpack(self._start_at(guess, x_init))
+        states[:, 6:8] = x_init[6:8]
+        inputs[:, :2] = 0.0
+        return self.ocp.pack(states, inputs)
+
     def _start_at(self, w: np.ndarray, x_init: np.ndarray) -> np.ndarray:
         w = w.copy()
         w[self.ocp.state_index(0)] = np.concatenate([x_init, [0.0]])
@@ -306,19 +348,23 @@ class NmpcController:
         return self.ocp.pack(states, inputs)
 
     def _output(self, plan, act, reference, result: SqpResult, fallback: str,
-                t0: tuple[float, float]) -> NmpcStep:
+                t0: tuple[float, float], selection) -> NmpcStep:
         c = self.config
         states, inputs = self.ocp.unpack(plan)
         rate_max = np.array([c.dnT_max, c.dnS_max])
         rates = np.clip(inputs[0, :2], -rate_max, rate_max)
-        command = np.clip(act + rates * c.control_period_s, [-c.nT_max, -c.nS_max],
-                          [c.nT_max, c.nS_max])
+        wanted = act + rates * c.control_period_s
+        command = np.clip(wanted, [-c.nT_max, -c.nS_max], [c.nT_max, c.nS_max])
+        clipped = bool(np.abs(rates - inputs[0, :2]).max() > 1e-6
+                       or np.abs(command - wanted).max() > 1e-6)
         stats = SolverStats(
             method=self.method, ok=result.ok, converged=result.converged, status=result.status,
             fallback=fallback, sqp_iterations=result.sqp_iterations,
             qp_iterations=result.qp_iterations,
             consecutive_failures=self.consecutive_failures,
             time_total_s=time.perf_counter() - t0[0], cpu_time_s=time.thread_time() - t0[1],
-            time_linearisation_s=result.time_linearisation_s, time_qp_s=result.time_qp_s)
+            time_linearisation_s=result.time_linearisation_s, time_qp_s=result.time_qp_s,
+            segments_dropped=selection.dropped, dropped_nearest_m=selection.dropped_nearest_m,
+            command_clipped=clipped)
         return NmpcStep(command, rates, states[:, :NX_BOAT].copy(), inputs[:, :2].copy(),
                         states[1:, NX - 1].copy(), reference, stats)

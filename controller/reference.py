@@ -106,6 +106,10 @@ def reference_trajectory(path: WaypointPath, position, heading_rad: float, speed
     The closest point is searched on arc lengths [progress_m, progress_m + search_ahead_m]
     (the whole rest of the path if None): forward only, so the reference never runs back.
     """
+    try:
+        speed_mps = float(speed_mps)
+    except (TypeError, ValueError):
+        speed_mps = float("nan")
     if not np.isfinite(speed_mps) or speed_mps < 0:
         raise InputError(f"target speed: must be a non-negative number of m/s, got {speed_mps!r}")
     s_max = None if search_ahead_m is None else progress_m + search_ahead_m
