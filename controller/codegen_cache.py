@@ -1,10 +1,12 @@
 """Generate C for a CasADi Function, compile it once, and keep the shared library in the
 user's cache folder.
 
-The key is a hash of the generated code, the compiler command and flags, and the CasADi
-version: a new model, structure or compiler gives a new library, an unchanged one is loaded
-without compiling. With no compiler (or a failing one) the interpreted Function is used, with
-a warning: slower, same results. CasADi's own `jit` recompiles at every start; this does not.
+The key is a hash of the generated code, the compiler flags and the CasADi version: a new
+model, structure or flag gives a new library, an unchanged one is loaded without compiling,
+and without needing a compiler (a boat computer may carry the cache but no gcc). With no
+library and no compiler (or a failing one, or a library that does not load) the interpreted
+Function is used, with a warning: slower, same results. CasADi's own `jit` recompiles at every
+start; this does not.
 """
 
 from __future__ import annotations
@@ -59,12 +61,20 @@ def generate_c(function: ca.Function) -> str:
     return gen.dump()
 
 
-def cache_key(code: str, command: list[str]) -> str:
+def cache_key(code: str, flags: list[str]) -> str:
+    """24 hex digits of the code, the compiler flags and the CasADi version."""
     h = hashlib.sha256()
-    for part in (code, "\0".join(command), ca.__version__):
+    for part in (code, "\0".join(flags), ca.__version__):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()[:24]
+
+
+def library_path(name: str, code: str, flags: tuple[str, ...] = DEFAULT_FLAGS,
+                 link: tuple[str, ...] = ("-lm",), directory: Path | None = None) -> Path:
+    """Where the library of `code` built with `flags` and `link` lives in the cache."""
+    options = ["-shared", "-fPIC", *flags, *link]
+    return (directory or cache_dir()) / f"{name}-{cache_key(code, options)}.so"
 
 
 def build_library(name: str, code: str, flags: tuple[str, ...] = DEFAULT_FLAGS,
@@ -72,16 +82,17 @@ def build_library(name: str, code: str, flags: tuple[str, ...] = DEFAULT_FLAGS,
                   ) -> tuple[Path, bool, float]:
     """Compile C `code` into a cached shared library: (path, cache_hit, compile seconds).
 
-    Raises OSError or CalledProcessError when there is no compiler or it fails.
+    Raises OSError or CalledProcessError when it is not cached and there is no compiler or
+    it fails.
     """
+    directory = directory or cache_dir()
+    library = library_path(name, code, flags, link, directory)
+    if library.exists():
+        return library, True, 0.0
     cc = compiler()
     if cc is None:
         raise OSError("no C compiler found (set CC, or install gcc)")
-    directory = directory or cache_dir()
     command = [cc, "-shared", "-fPIC", *flags]
-    library = directory / f"{name}-{cache_key(code, command + list(link))}.so"
-    if library.exists():
-        return library, True, 0.0
     t0 = time.perf_counter()
     directory.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=directory) as tmp:
@@ -101,10 +112,10 @@ def compile_cached(function: ca.Function, flags: tuple[str, ...] = DEFAULT_FLAGS
     try:
         library, hit, seconds = build_library(function.name(), generate_c(function), flags,
                                               directory=directory)
-    except (OSError, subprocess.CalledProcessError) as exc:
+        loaded = ca.external(function.name(), str(library))
+    except (OSError, RuntimeError, subprocess.CalledProcessError) as exc:
         detail = getattr(exc, "stderr", "") or str(exc)
-        warnings.warn(f"cannot compile {function.name()}, running it interpreted (slower): "
-                      f"{detail.strip()[:300]}", RuntimeWarning, stacklevel=2)
+        warnings.warn(f"cannot compile or load {function.name()}, running it interpreted "
+                      f"(slower): {detail.strip()[:300]}", RuntimeWarning, stacklevel=2)
         return CompiledFunction(function, False, False, None, 0.0)
-    return CompiledFunction(ca.external(function.name(), str(library)), True, hit, library,
-                            seconds)
+    return CompiledFunction(loaded, True, hit, library, seconds)
