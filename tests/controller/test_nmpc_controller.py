@@ -2,8 +2,11 @@
 cold start, the code cache, bad input and failure handling (issue 5, "Must show")."""
 
 import json
+import os
 import subprocess
 import sys
+import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -26,8 +29,10 @@ def rti():
 
 
 def check_bounds(run, cfg=CFG):
-    """Commands and plans inside |n| <= 100 %, and commands move at most the rate limits."""
+    """Commands and plans inside |n| <= 100 %, and commands move at most the rate limits;
+    the plan itself asked for no more (the controller never had to clip its first move)."""
     tol = 1e-6
+    assert not any(s.stats.command_clipped for s in run.steps)
     cmds = np.array([s.command for s in run.steps])
     assert np.all(np.abs(cmds[:, 0]) <= cfg.nT_max + tol)
     assert np.all(np.abs(cmds[:, 1]) <= cfg.nS_max + tol)
@@ -119,21 +124,45 @@ def test_a_boat_at_rest_between_walls_starts_cleanly(current):
     check_bounds(run)
 
 
-def test_a_second_process_finds_the_compiled_code_in_the_cache(rti):
-    assert rti.compiled_info.compiled, "no compiler here: the fallback is tested elsewhere"
-    library = rti.compiled_info.library
-    before = library.stat().st_mtime_ns
-    libraries = sorted(p.name for p in library.parent.glob("*.so"))
-    code = ("import json; from controller.nmpc_controller import NmpcController; "
-            "c = NmpcController(); i = c.compiled_info; "
-            "print(json.dumps({'hit': i.cache_hit, 'lib': str(i.library), "
-            "'compile_s': i.compile_s, 'hpipm_hit': c._qp.qp.cache_hit}))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True)
-    info = json.loads(out.stdout.strip().splitlines()[-1])
-    assert info == {"hit": True, "lib": str(library), "compile_s": 0.0, "hpipm_hit": True}
-    assert library.stat().st_mtime_ns == before
-    assert sorted(p.name for p in library.parent.glob("*.so")) == libraries
+_CACHE_PROBE = (
+    "import json, warnings; warnings.simplefilter('error', RuntimeWarning); "
+    "from controller.nmpc_controller import NmpcController; "
+    "c = NmpcController(); i = c.compiled_info; "
+    "print(json.dumps({'hit': i.cache_hit, 'lib': str(i.library), 'compile_s': i.compile_s, "
+    "'hpipm_hit': c._qp.qp.cache_hit}))")
+
+
+def test_a_cold_cache_compiles_once_and_a_second_process_compiles_nothing(tmp_path):
+    """Two processes on an empty cache folder: the first compiles the linearisation and the
+    HPIPM shim, the second finds both and leaves the folder untouched."""
+    env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path)}
+
+    def probe():
+        out = subprocess.run([sys.executable, "-c", _CACHE_PROBE], capture_output=True,
+                             text=True, check=True, env=env)
+        return json.loads(out.stdout.strip().splitlines()[-1])
+
+    first = probe()
+    assert first["hit"] is False and first["hpipm_hit"] is False and first["compile_s"] > 0
+    library = Path(first["lib"])
+    assert library.parent == tmp_path / "canalnav"
+    files = {p.name: p.stat().st_mtime_ns for p in library.parent.iterdir()}
+    second = probe()
+    assert second == {"hit": True, "lib": str(library), "compile_s": 0.0, "hpipm_hit": True}
+    assert {p.name: p.stat().st_mtime_ns for p in library.parent.iterdir()} == files
+
+
+def test_a_cached_library_is_used_without_a_compiler(rti, monkeypatch):
+    """A boat computer may carry the cache but no gcc: the libraries load all the same."""
+    from controller import codegen_cache
+
+    assert rti.compiled_info.compiled
+    monkeypatch.setattr(codegen_cache, "compiler", lambda: None)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        ctl = NmpcController(CFG)
+    assert ctl.compiled_info.compiled and ctl.compiled_info.cache_hit
+    assert ctl._qp.options.solver == "hpipm"
 
 
 def test_no_compiler_falls_back_to_interpreted_functions(monkeypatch, tmp_path):
@@ -146,9 +175,44 @@ def test_no_compiler_falls_back_to_interpreted_functions(monkeypatch, tmp_path):
     assert not info.compiled and info.function is ocp_fn and not list(tmp_path.iterdir())
 
 
+def test_with_no_compiler_and_an_empty_cache_the_controller_runs_interpreted(monkeypatch,
+                                                                            tmp_path):
+    from controller import codegen_cache
+
+    monkeypatch.setattr(codegen_cache, "compiler", lambda: None)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    with pytest.warns(RuntimeWarning) as caught:
+        ctl = NmpcController(CFG)
+    text = " ".join(str(w.message) for w in caught)
+    assert "interpreted" in text and "CasADi's" in text  # the linearisation and the QP
+    assert not ctl.compiled_info.compiled
+    canal = straight_canal(width_m=20.0)
+    assert ctl.step(X0, ACT0, canal.segments(), canal.waypoints, 2.0).stats.ok
+
+
+def test_a_library_that_does_not_load_falls_back_with_a_warning(tmp_path):
+    from controller import codegen_cache
+
+    fn = NmpcController(CFG, method="ipopt").ocp.linearisation
+    broken = codegen_cache.library_path(fn.name(), codegen_cache.generate_c(fn),
+                                        directory=tmp_path)
+    broken.parent.mkdir(parents=True, exist_ok=True)
+    broken.write_bytes(b"not a shared library")
+    with pytest.warns(RuntimeWarning, match="cannot compile or load"):
+        info = codegen_cache.compile_cached(fn, directory=tmp_path)
+    assert not info.compiled and info.function is fn
+
+
 @pytest.mark.parametrize("field, value, words", [
     ("state", [0, float("nan"), 0, 2, 0, 0], "NaN"),
     ("state", [0, 0, 0], "6 numbers"),
+    ("state", np.zeros((2, 3)), r"shape \(2, 3\)"),
+    ("target_speed_mps", "fast", "target_speed_mps: expected a number, got 'fast'"),
+    ("target_speed_mps", None, "target_speed_mps: expected a number"),
+    ("target_speed_mps", 1e6, r"top speed at 100 % throttle\), got 1e\+06"),
+    ("target_speed_mps", -1.0, "target_speed_mps: must lie in"),
+    ("elapsed_s", "x", "elapsed_s: expected a number"),
+    ("elapsed_s", -0.1, "elapsed_s: must be a non-negative"),
     ("waypoints", [], "empty"),
     ("segments", [[10.0, 5.0, 0.0, 0.0]], "zero or negative length"),
     ("actuators", [float("inf"), 0], "NaN or infinity"),
@@ -156,6 +220,7 @@ def test_no_compiler_falls_back_to_interpreted_functions(monkeypatch, tmp_path):
 def test_bad_input_is_a_clear_error(rti, field, value, words):
     args = {"state": X0, "actuators": ACT0, "segments": np.zeros((0, 4)),
             "waypoints": [[0.0, 0.0], [100.0, 0.0]], "target_speed_mps": 2.0}
+    rti.reset()
     args[field] = value
     with pytest.raises(InputError, match=words):
         rti.step(**args)
@@ -188,6 +253,23 @@ def test_a_failing_qp_falls_back_then_reports_failure():
     assert third.stats.consecutive_failures == 2
     with pytest.raises(SolverError, match="3 steps in a row"):
         good.step(x, third.command, segs, canal.waypoints, 2.0)
+
+
+def test_a_cold_start_that_fails_holds_the_actuators_then_reports_failure():
+    """With no solved plan to follow, a failed solve is not passed on either: the actuators
+    are held (rates 0), the step says so, and the third failure in a row raises."""
+    canal = straight_canal(width_m=20.0)
+    segs = canal.segments()
+    ctl = NmpcController(CFG, qp=QpOptions(iter_max=1), max_failures=3)
+    act = np.array([30.0, 5.0])
+    for k in (1, 2):
+        step = ctl.step(X0, act, segs, canal.waypoints, 2.0)
+        assert not step.stats.ok and step.stats.fallback == "hold"
+        assert step.stats.consecutive_failures == k
+        assert np.array_equal(step.command, act) and np.array_equal(step.rates, [0.0, 0.0])
+        assert np.all(step.states[:, 6:8] == act)
+    with pytest.raises(SolverError, match="3 steps in a row"):
+        ctl.step(X0, act, segs, canal.waypoints, 2.0)
 
 
 def test_a_failed_warm_start_is_retried_from_the_safe_guess(monkeypatch):
