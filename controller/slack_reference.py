@@ -63,14 +63,22 @@ class _Frames:
         return port, starboard
 
 
+def walls_abeam(points: np.ndarray, headings: np.ndarray,
+                segments: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distance (n,) from each point (n, 2) to the nearest wall abeam to port and to
+    starboard (inf if none) of a path with headings (n,), among segments (M, 4) rows
+    (x_c, y_c, theta, length): a segment's nearest point within 60 deg of the normal."""
+    points = np.asarray(points, float).reshape(-1, 2)
+    if len(segments) == 0:
+        return np.full(len(points), np.inf), np.full(len(points), np.inf)
+    return _Frames(points, np.asarray(headings, float), segments).walls_abeam()
+
+
 def free_width(points: np.ndarray, headings: np.ndarray, segments: np.ndarray) -> np.ndarray:
     """Width (n,) between the nearest walls abeam to port and to starboard of each point
     (inf where one side has none), for points (n, 2) on a path with headings (n,) and segments
     (M, 4) rows (x_c, y_c, theta, length)."""
-    points = np.asarray(points, float).reshape(-1, 2)
-    if len(segments) == 0:
-        return np.full(len(points), np.inf)
-    port, starboard = _Frames(points, np.asarray(headings, float), segments).walls_abeam()
+    port, starboard = walls_abeam(points, headings, segments)
     return port + starboard
 
 
