@@ -428,26 +428,27 @@ def _offset_fold(centre: np.ndarray, width: np.ndarray, faces) -> str | None:
     the canal comes back within its width of itself."""
     s = Polyline(centre).cumulative
     ahead = np.diff(centre, axis=0)
-    fix = ("round the bend wider (corner_radius_m), move the centre line apart (centre_line) "
-           "or make the canal narrower (width_m / width_profile)")
+    narrower = "make the canal narrower there (width_m / width_profile)"
     for face, side in zip(faces, ("left", "right")):
         back = np.flatnonzero(np.einsum("ij,ij->i", np.diff(face, axis=0), ahead) <= 0.0)
         if len(back):
             k = int(back[0])
             return (f"the {side} wall folds back on itself near s = {s[k]:.0f} m along the "
                     f"centre line: a bend there is tighter than half the width "
-                    f"({width[k] / 2:.1f} m); {fix}")
+                    f"({width[k] / 2:.1f} m); round it wider (corner_radius_m) or {narrower}")
         crossing = polyline_self_touch(face, ON_WALL_M)
         if crossing is not None:
             k = crossing[0]
             return (f"the {side} wall crosses itself near s = {s[k]:.0f} m along the centre "
-                    f"line: a bend or U-turn there is tighter than half the width, or the "
-                    f"canal comes back within its width of itself; {fix}")
+                    f"line: the canal comes back within its width of itself (a bend or U-turn "
+                    f"tighter than half the width, or a loop); widen the bend (corner_radius_m), "
+                    f"move the centre line apart, or {narrower}")
     hits = segments_touch(faces[0][:-1], faces[0][1:], faces[1][:-1], faces[1][1:], ON_WALL_M)
     if hits.any():
         k = int(np.argwhere(hits)[0][0])
         return (f"the left and right walls cross near s = {s[k]:.0f} m along the centre line: "
-                f"the canal comes back within its width of itself; {fix}")
+                f"the canal comes back within its width of itself; move the centre line "
+                f"apart there, or {narrower}")
     return None
 
 
