@@ -18,10 +18,12 @@ from pathlib import Path
 import numpy as np
 
 from controller.errors import InputError
-from controller.geometry import Polyline, segments_cross
+from controller.geometry import Polyline
 from controller.params import IDENTIFIED, BoatParams
 
-from .world import OBSTACLE_KINDS, CanalWorld, Obstacle, Wall
+from .lidar import LidarNoise
+from .sensors import AhrsConfig, GpsConfig
+from .world import OBSTACLE_KINDS, CanalWorld, Obstacle, Wall, WorldError, walls_crossing
 
 CONTROLLERS = ("nmpc", "los-pid", "lexicographic")
 PERCEPTIONS = ("lidar", "known-walls")
@@ -36,6 +38,8 @@ class Criteria:
     min_clearance_m: float | None = None
     max_time_below_desired_s: float | None = None
     max_mean_cross_track_m: float | None = None
+    min_clearance_where_wide_m: float | None = None  # where the canal is >= 2 (R_b + d_p) wide
+    max_mean_centre_offset_narrow_m: float | None = None  # where it is narrower than that
 
 
 @dataclass(frozen=True)
@@ -64,6 +68,9 @@ class Scenario:
     snapshot_times_s: tuple = ()
     geodetic_origin: tuple | None = None  # (lat_deg, lon_deg, alt_m) of the local frame's origin
     replay_mount: tuple = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # x, y, z m (body, z down), roll, pitch, yaw rad
+    gps: GpsConfig = GpsConfig()
+    ahrs: AhrsConfig = AhrsConfig()
+    lidar_noise: LidarNoise = LidarNoise()
 
 
 # -- small typed readers that name the field -------------------------------------------------
@@ -89,19 +96,31 @@ class _Table:
         self.used.add(key)
         return self.data.get(key, default)
 
-    def number(self, key: str, default=None, low=None, strict=False, required=False):
+    def number(self, key: str, default=None, low=None, strict=False, required=False, high=None):
         if key not in self.data:
             if required:
                 raise self.err(key, "is required")
             return default
         v = self.raw(key)
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
+        if not _is_number(v):
             raise self.err(key, f"expected a number, got {v!r}")
         v = float(v)
         if not math.isfinite(v):
             raise self.err(key, f"must be finite, got {v!r}")
         if low is not None and (v <= low if strict else v < low):
             raise self.err(key, f"must be {'>' if strict else '>='} {low}, got {v!r}")
+        if high is not None and v > high:
+            raise self.err(key, f"must be <= {high}, got {v!r}")
+        return v
+
+    def integer(self, key: str, default=None, low=None):
+        if key not in self.data:
+            return default
+        v = self.raw(key)
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self.err(key, f"expected a whole number, got {v!r}")
+        if low is not None and v < low:
+            raise self.err(key, f"must be >= {low}, got {v!r}")
         return v
 
     def string(self, key: str, default=None, choices=None):
@@ -122,18 +141,38 @@ class _Table:
             raise self.err(key, f"expected true or false, got {v!r}")
         return v
 
-    def points(self, key: str, required=False, min_points=2):
+    def numbers(self, key: str, default=(), low=None):
+        """A list of finite numbers (booleans are not numbers)."""
+        if key not in self.data:
+            return default
+        v = self.raw(key)
+        if not isinstance(v, list) or not all(_is_number(x) and math.isfinite(x) for x in v):
+            raise self.err(key, f"expected a list of numbers, got {v!r}")
+        if low is not None and any(x < low for x in v):
+            raise self.err(key, f"must all be >= {low}, got {v!r}")
+        return tuple(float(x) for x in v)
+
+    def side_pair(self, key: str, default: float, low: float, strict: bool):
+        """A number for both banks, or a [left, right] pair."""
+        v = self.data.get(key, default)
+        self.used.add(key)
+        pair = v if isinstance(v, list) else [v]
+        if len(pair) not in (1, 2) or not all(_is_number(x) and math.isfinite(x) for x in pair):
+            raise self.err(key, f"expected a number or a [left, right] pair, got {v!r}")
+        if any(x <= low if strict else x < low for x in pair):
+            raise self.err(key, f"must be {'>' if strict else '>='} {low}, got {v!r}")
+        return tuple(float(x) for x in pair) if len(pair) == 2 else float(pair[0])
+
+    def points(self, key: str, required=False, min_points=2, pair="[north_m, east_m]"):
         if key not in self.data:
             if required:
                 raise self.err(key, "is required")
             return None
         v = self.raw(key)
-        try:
-            arr = np.array(v, dtype=float)
-        except (TypeError, ValueError):
-            raise self.err(key, "expected a list of [north_m, east_m] pairs") from None
-        if arr.ndim != 2 or arr.shape[1] != 2:
-            raise self.err(key, "expected a list of [north_m, east_m] pairs")
+        if not isinstance(v, list) or not all(
+                isinstance(q, list) and len(q) == 2 and all(map(_is_number, q)) for q in v):
+            raise self.err(key, f"expected a list of {pair} pairs of numbers")
+        arr = np.array(v, dtype=float).reshape(-1, 2)
         if len(arr) < min_points:
             raise self.err(key, f"needs at least {min_points} points, got {len(arr)}")
         if not np.all(np.isfinite(arr)):
@@ -159,6 +198,10 @@ class _Table:
         unknown = sorted(set(self.data) - self.used)
         if unknown:
             raise self.err(unknown[0], "unknown field (check the spelling; see scenarios/README.md)")
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
 # -- canal geometry helpers -----------------------------------------------------------------
@@ -194,112 +237,149 @@ def round_corners(points: np.ndarray, radius_m: float, spacing_m: float = 2.0) -
 
 
 def _load_canal(t: _Table, obstacles: tuple, name: str) -> CanalWorld:
-    source = t.source
+    if t.has("wall"):
+        return _load_walls(t, obstacles, name)
+    centre = t.points("centre_line", required=True)
+    step = np.hypot(*np.diff(centre, axis=0).T)
+    if np.any(step <= 0.0):
+        i = int(np.argmin(step)) + 1
+        raise t.err("centre_line", f"point {i} ({centre[i, 0]:g}, {centre[i, 1]:g}) repeats the "
+                    "one before it")
+    radius = t.number("corner_radius_m", 0.0, low=0)
+    spacing = t.number("resample_m", 2.0, low=0, strict=True)
+    centre = round_corners(centre, radius, spacing)
+    step = np.hypot(*np.diff(centre, axis=0).T)
+    if np.any(step <= 1e-9):  # resampled onto itself: the line turned straight back
+        s = float(np.cumsum(step)[int(np.argmin(step))])
+        raise t.err("centre_line", f"turns straight back on itself near s = {s:.0f} m along it; "
+                    "a U-turn needs two corners, each rounded wider (corner_radius_m) than half "
+                    "the width")
+    if t.has("width_profile"):
+        if t.has("width_m"):
+            raise t.err("width_m", "give width_m or width_profile, not both")
+        width_key = "width_profile"
+        width = t.points("width_profile", min_points=1, pair="[s_m, width_m]")
+        if np.any(width[:, 1] <= 0):
+            raise t.err("width_profile", f"widths must be > 0, got {width[:, 1].min():g}")
+        if np.any(np.diff(width[:, 0]) <= 0):
+            raise t.err("width_profile", "the s_m values must increase")
+    else:
+        width_key = "width_m"
+        width = t.number("width_m", required=True, low=0, strict=True)
     try:
-        if t.has("wall"):
-            if t.has("width_m") or t.has("width_profile"):
-                raise t.err("wall", "give either explicit walls or a centre line with a width, not both")
-            walls = []
-            for w in t.tables("wall"):
-                walls.append(Wall(
-                    w.points("points", required=True),
-                    height_m=w.number("height_m", 1.5, low=0, strict=True),
-                    land_side=w.string("land_side", "left", choices=("left", "right")),
-                    setback_m=w.number("setback_m", 5.0, low=0, strict=True),
-                    backdrop_height_m=w.number("backdrop_height_m", 8.0, low=0),
-                    name=w.string("name", f"wall {len(walls)}"),
-                ))
-                w.done()
-            centre = t.points("centre_line")
-            t.done()
-            return CanalWorld.from_walls(walls, obstacles, centre, name)
-        centre = t.points("centre_line", required=True)
-        radius = t.number("corner_radius_m", 0.0, low=0)
-        spacing = t.number("resample_m", 2.0, low=0, strict=True)
-        centre = round_corners(centre, radius, spacing)
-        if t.has("width_profile"):
-            width = t.raw("width_profile")
-            if t.has("width_m"):
-                raise t.err("width_m", "give width_m or width_profile, not both")
-        else:
-            width = t.number("width_m", required=True, low=0, strict=True)
-
-        def side(key, default):
-            v = t.raw(key, default)
-            if isinstance(v, list):
-                if len(v) != 2:
-                    raise t.err(key, "expected a number or a [left, right] pair")
-                return tuple(v)
-            return v
-
         world = CanalWorld.from_centre_line(
-            centre, width, wall_height_m=side("wall_height_m", 1.5), setback_m=side("setback_m", 5.0),
-            backdrop_height_m=side("backdrop_height_m", 8.0), obstacles=obstacles, name=name)
-        t.done()
-        return world
-    except InputError as exc:
-        msg = str(exc)
-        raise InputError(msg if msg.startswith(source) else f"{source}: canal: {msg}") from None
+            centre, width, wall_height_m=t.side_pair("wall_height_m", 1.5, 0.0, strict=True),
+            setback_m=t.side_pair("setback_m", 5.0, 0.0, strict=True),
+            backdrop_height_m=t.side_pair("backdrop_height_m", 8.0, 0.0, strict=False),
+            obstacles=obstacles, name=name)
+    except WorldError as exc:
+        key = width_key if exc.key == "width_m" else exc.key
+        raise t.err(key, exc.detail) from None
+    t.done()
+    return world
+
+
+def _load_walls(t: _Table, obstacles: tuple, name: str) -> CanalWorld:
+    """Explicit [[canal.wall]] tables; a crossing names the walls' fields."""
+    for key in ("width_m", "width_profile", "corner_radius_m", "resample_m"):
+        if t.has(key):
+            raise t.err(key, "belongs to a canal given by its centre line, not by explicit walls")
+    walls, tables = [], t.tables("wall")
+    for i, w in enumerate(tables):
+        wall_name = w.string("name", f"wall {i}")
+        points = w.points("points", required=True)
+        try:
+            walls.append(Wall(
+                points, height_m=w.number("height_m", 1.5, low=0, strict=True),
+                land_side=w.string("land_side", "left", choices=("left", "right")),
+                setback_m=w.number("setback_m", 5.0, low=0, strict=True),
+                backdrop_height_m=w.number("backdrop_height_m", 8.0, low=0), name=wall_name))
+        except WorldError as exc:
+            raise w.err(exc.key, f"wall {wall_name!r}: {exc.detail}") from None
+        w.done()
+    crossing = walls_crossing(walls)
+    if crossing is not None:
+        i, j, leg_i, leg_j = crossing
+        raise tables[i].err("points", f"walls {walls[i].name!r} and {walls[j].name!r} "
+                            f"({tables[j].where}) cross each other (their legs {leg_i} and {leg_j})")
+    centre = t.points("centre_line")
+    t.done()
+    try:
+        return CanalWorld.from_walls(walls, obstacles, centre, name)
+    except WorldError as exc:
+        raise t.err(exc.key, exc.detail) from None
 
 
 def _load_obstacles(doc: _Table) -> tuple:
     out = []
     for o in doc.tables("obstacle"):
+        name = o.string("name", f"obstacle {len(out)}")
+        outline = o.points("outline", required=True, min_points=3)
+        z_bottom = o.number("z_bottom_m", 0.0, low=0)
+        z_top = o.number("z_top_m", 1.0)
+        if z_top <= z_bottom:
+            raise o.err("z_top_m", f"must be above z_bottom_m ({z_bottom:g}), got {z_top:g}")
         try:
-            out.append(Obstacle(
-                o.points("outline", required=True, min_points=3),
-                z_top_m=o.number("z_top_m", 1.0),
-                z_bottom_m=o.number("z_bottom_m", 0.0, low=0),
-                kind=o.string("kind", "pier", choices=OBSTACLE_KINDS),
-                name=o.string("name", f"obstacle {len(out)}"),
-            ))
-        except InputError as exc:
-            msg = str(exc)
-            raise InputError(msg if msg.startswith(o.source) else f"{o.source}: {o.where}: {msg}") from None
+            out.append(Obstacle(outline, z_top_m=z_top, z_bottom_m=z_bottom,
+                                kind=o.string("kind", "pier", choices=OBSTACLE_KINDS), name=name))
+        except WorldError as exc:
+            raise o.err(exc.key, f"obstacle {name!r}: {exc.detail}") from None
         o.done()
     return tuple(out)
 
 
-def _route(t: _Table, world: CanalWorld) -> np.ndarray:
+@dataclass(frozen=True)
+class _Route:
+    """Waypoints and, for each, the field to blame if it is wrong."""
+
+    waypoints: np.ndarray  # (K, 2)
+    fields: tuple[str, ...]
+
+
+def _route(t: _Table, world: CanalWorld) -> _Route:
     """Waypoints: explicit, or along the centre line every `spacing_m` with lateral offsets."""
+    generated = [k for k in ("spacing_m", "offset_m", "offsets") if t.has(k)]
     if t.has("waypoints"):
-        return t.points("waypoints", required=True)
+        if generated:
+            raise t.err(generated[0], "give waypoints, or spacing_m / offset_m / offsets to "
+                        "place them along the centre line, not both")
+        waypoints = t.points("waypoints", required=True)
+        return _Route(waypoints, ("route.waypoints",) * len(waypoints))
     if world.centre_line is None:
         raise t.err("waypoints", "is required when the canal has no centre line")
     spacing = t.number("spacing_m", 25.0, low=0, strict=True)
     line = Polyline(world.centre_line)
     s = np.append(np.arange(0.0, line.length, spacing), line.length)
     offset = np.full(len(s), t.number("offset_m", 0.0))
-    for i, o in enumerate(t.tables("offsets")):
+    blame = np.full(len(s), "route.offset_m" if offset[0] else "canal.centre_line", dtype=object)
+    for o in t.tables("offsets"):
         s0 = o.number("from_s_m", required=True, low=0)
         s1 = o.number("to_s_m", required=True, low=0)
         off = o.number("offset_m", required=True)
         if s1 <= s0:
             raise o.err("to_s_m", f"must be greater than from_s_m ({s0}), got {s1}")
-        offset[(s >= s0) & (s <= s1)] = off
+        span = (s >= s0) & (s <= s1)
+        offset[span] = off
+        blame[span] = f"{o.where}.offset_m"
         o.done()
     xy, heading = line.at(s)
     normal = np.column_stack([-np.sin(heading), np.cos(heading)])  # starboard of the centre line
-    return xy + offset[:, None] * normal
+    return _Route(xy + offset[:, None] * normal, tuple(blame))
 
 
-def check_waypoints_inside(world: CanalWorld, waypoints: np.ndarray, source: str, field_name: str) -> None:
-    """Every waypoint must lie on the water: reachable from the centre line without crossing a
-    wall, and not inside an obstacle."""
-    if world.centre_line is None:
-        return
-    line = Polyline(world.centre_line)
-    walls = world.wall_polylines()
-    a = np.vstack([w[:-1] for w in walls])
-    b = np.vstack([w[1:] for w in walls])
-    for i, p in enumerate(np.asarray(waypoints)):
-        where = f"{source}: field {field_name!r}: waypoint {i} ({p[0]:.1f}, {p[1]:.1f})"
-        for o in world.obstacles:
-            if o.z_bottom_m == 0 and o.contains(p)[0]:
-                raise InputError(f"{where} lies inside obstacle {o.name!r}")
-        foot = line.project(p)[1]
-        if np.hypot(*(p - foot)) > 1e-9 and segments_cross(foot[None, :], p[None, :], a, b).any():
-            raise InputError(f"{where} lies outside the canal")
+def check_on_water(world: CanalWorld, route: _Route, source: str) -> None:
+    """Every waypoint must lie on the water: inside the canal (not on or across a wall, not
+    past its open ends) and not inside an obstacle. The error names the field to fix."""
+    for i, (p, why) in enumerate(zip(route.waypoints, world.off_water(route.waypoints))):
+        if why is not None:
+            raise InputError(f"{source}: field {route.fields[i]!r}: waypoint {i} "
+                             f"({p[0]:.1f}, {p[1]:.1f}) lies {why}")
+
+
+def _distinct(waypoints: np.ndarray) -> np.ndarray:
+    """The waypoints without consecutive repeats (as the reference path sees them)."""
+    keep = np.concatenate([[True], np.hypot(*np.diff(waypoints, axis=0).T) > 1e-9])
+    return waypoints[keep]
 
 
 def _params(t: _Table | None, base: BoatParams, source: str) -> BoatParams:
@@ -323,11 +403,19 @@ def _params(t: _Table | None, base: BoatParams, source: str) -> BoatParams:
 
 
 def load_scenario(path: str | Path) -> Scenario:
+    """Read and check a scenario file; every problem is an InputError naming the file."""
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_bytes().decode("utf-8")
     except FileNotFoundError:
         raise InputError(f"{path}: no such scenario file") from None
+    except IsADirectoryError:
+        raise InputError(f"{path}: is a folder, not a scenario file (give a .toml file)") from None
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{path}: not UTF-8 text (byte {exc.start}: "
+                         f"{exc.object[exc.start:exc.start + 1]!r}); a scenario is a TOML file") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read the scenario file: {exc.strerror}") from None
     return parse_scenario(text, str(path), path)
 
 
@@ -343,40 +431,27 @@ def parse_scenario(text: str, source: str = "<string>", path: Path | None = None
     description = meta.string("description", "")
     duration = meta.number("duration_s", required=True, low=0, strict=True)
     goal_radius = meta.number("goal_radius_m", 5.0, low=0, strict=True)
-    seed = meta.number("seed", 0.0, low=0)
-    if seed != int(seed):
-        raise meta.err("seed", f"must be a whole number, got {seed}")
+    seed = meta.integer("seed", 0, low=0)
     default_test = meta.boolean("default_test", True)
-    snaps = meta.raw("snapshot_times_s", [])
-    if not isinstance(snaps, list) or not all(isinstance(v, (int, float)) for v in snaps):
-        raise meta.err("snapshot_times_s", "expected a list of times in seconds")
+    snaps = meta.numbers("snapshot_times_s", (), low=0)
     meta.done()
 
     obstacles = _load_obstacles(doc)
     world = _load_canal(doc.table("canal", required=True), obstacles, name)
 
     route = doc.table("route", required=True)
-    waypoints = _route(route, world)
+    planned = _route(route, world)
     target_speed = route.number("target_speed_mps", 2.0, low=0, strict=True)
     route.done()
-    check_waypoints_inside(world, waypoints, source, "route.waypoints")
+    waypoints = planned.waypoints
+    distinct = _distinct(waypoints)
+    if len(distinct) < 2:
+        raise InputError(f"{source}: field {planned.fields[0]!r}: needs at least two distinct "
+                         f"waypoints, got {len(distinct)} (a point repeating the one before it "
+                         "does not count)")
+    check_on_water(world, planned, source)
 
-    init = doc.table("initial") or _Table({}, "initial", source)
-    if init.has("x_m") or init.has("y_m"):
-        x0 = np.array([init.number("x_m", required=True), init.number("y_m", required=True),
-                       math.radians(init.number("psi_deg", required=True)), 0, 0, 0], float)
-    else:
-        start = waypoints[0]
-        d = waypoints[1] - waypoints[0]
-        psi = math.atan2(d[1], d[0])
-        if init.has("psi_deg"):
-            psi = math.radians(init.number("psi_deg"))
-        x0 = np.array([start[0], start[1], psi, 0, 0, 0], float)
-    x0[3] = init.number("u_mps", 0.0)
-    x0[4] = init.number("v_mps", 0.0)
-    x0[5] = math.radians(init.number("r_degps", 0.0))
-    init.done()
-    check_waypoints_inside(world, x0[None, :2], source, "initial")
+    x0 = _initial_state(doc.table("initial") or _Table({}, "initial", source), distinct, world)
 
     cur = doc.table("current") or _Table({}, "current", source)
     current = (cur.number("north_mps", 0.0), cur.number("east_mps", 0.0))
@@ -385,10 +460,9 @@ def parse_scenario(text: str, source: str = "<string>", path: Path | None = None
     origin = None
     org = doc.table("origin")
     if org is not None:
-        origin = (org.number("lat_deg", required=True, low=-90), org.number("lon_deg", required=True, low=-180),
+        origin = (org.number("lat_deg", required=True, low=-90, high=90),
+                  org.number("lon_deg", required=True, low=-180, high=180),
                   org.number("alt_m", 0.0))
-        if origin[0] > 90 or origin[1] > 180:
-            raise org.err("lat_deg" if origin[0] > 90 else "lon_deg", "out of range")
         org.done()
 
     sens = doc.table("sensors") or _Table({}, "sensors", source)
@@ -400,6 +474,8 @@ def parse_scenario(text: str, source: str = "<string>", path: Path | None = None
                     math.radians(mount.number("pitch_deg", 0.0)),
                     math.radians(mount.number("yaw_deg", 0.0)))
     mount.done()
+    gps, ahrs = _gps(sens.table("gps")), _ahrs(sens.table("ahrs"))
+    lidar_noise = _lidar_noise(sens.table("lidar"))
     sens.done()
 
     plant = doc.table("plant") or _Table({}, "plant", source)
@@ -411,9 +487,8 @@ def parse_scenario(text: str, source: str = "<string>", path: Path | None = None
     controller = ctrl.string("type", "nmpc", choices=CONTROLLERS)
     d_p = ctrl.number("d_p_m", 2.0, low=0)
     ctrl_params = _params(ctrl.table("boat"), IDENTIFIED, source)
-    options = ctrl.raw("options", {})
-    if not isinstance(options, dict):
-        raise ctrl.err("options", "must be a table")
+    options = _controller_options(ctrl.table("options") or _Table({}, "controller.options", source),
+                                  controller, d_p, ctrl_params)
     ctrl.done()
 
     crit = doc.table("criteria") or _Table({}, "criteria", source)
@@ -423,6 +498,8 @@ def parse_scenario(text: str, source: str = "<string>", path: Path | None = None
         min_clearance_m=crit.number("min_clearance_m", None, low=0),
         max_time_below_desired_s=crit.number("max_time_below_desired_s", None, low=0),
         max_mean_cross_track_m=crit.number("max_mean_cross_track_m", None, low=0),
+        min_clearance_where_wide_m=crit.number("min_clearance_where_wide_m", None, low=0),
+        max_mean_centre_offset_narrow_m=crit.number("max_mean_centre_offset_narrow_m", None, low=0),
     )
     crit.done()
     doc.done()
@@ -430,10 +507,151 @@ def parse_scenario(text: str, source: str = "<string>", path: Path | None = None
     return Scenario(
         name=name, path=path, description=description, world=world, waypoints=waypoints,
         target_speed_mps=target_speed, initial_state=x0, current_ne=current,
-        duration_s=duration, goal_radius_m=goal_radius, seed=int(seed), perception=perception,
+        duration_s=duration, goal_radius_m=goal_radius, seed=seed, perception=perception,
         known_walls_range_m=known_range, plant_params=plant_params, actuator_rates=rates,
         controller=controller, controller_params=ctrl_params, d_p_m=d_p,
-        controller_options=dict(options), criteria=criteria, default_test=default_test,
-        snapshot_times_s=tuple(float(v) for v in snaps),
-        geodetic_origin=origin, replay_mount=replay_mount,
+        controller_options=options, criteria=criteria, default_test=default_test,
+        snapshot_times_s=snaps, geodetic_origin=origin, replay_mount=replay_mount,
+        gps=gps, ahrs=ahrs, lidar_noise=lidar_noise,
     )
+
+
+def _initial_state(init: _Table, waypoints: np.ndarray, world: CanalWorld) -> np.ndarray:
+    """[x, y, psi, u, v, r]: given, or at the first waypoint heading along the first leg."""
+    if init.has("x_m") or init.has("y_m"):
+        x0 = np.array([init.number("x_m", required=True), init.number("y_m", required=True),
+                       math.radians(init.number("psi_deg", required=True)), 0, 0, 0], float)
+        why = world.off_water(x0[None, :2])[0]
+        if why is not None:
+            raise InputError(f"{init.source}: fields 'initial.x_m', 'initial.y_m': the start "
+                             f"({x0[0]:.1f}, {x0[1]:.1f}) lies {why}")
+    else:
+        d = waypoints[1] - waypoints[0]
+        psi = math.atan2(d[1], d[0])
+        if init.has("psi_deg"):
+            psi = math.radians(init.number("psi_deg"))
+        x0 = np.array([waypoints[0, 0], waypoints[0, 1], psi, 0, 0, 0], float)
+    x0[3] = init.number("u_mps", 0.0)
+    x0[4] = init.number("v_mps", 0.0)
+    x0[5] = math.radians(init.number("r_degps", 0.0))
+    init.done()
+    return x0
+
+
+# -- sensors: only what the file gives, so the defaults stay the sensors' own ---------------
+def _gps(t: _Table | None) -> GpsConfig:
+    """[sensors.gps]: rate and 1-sigma noise of the RTK fix."""
+    if t is None:
+        return GpsConfig()
+    ahrs_hz = AhrsConfig().rate_hz
+    given = {
+        "rate_hz": t.number("rate_hz", None, low=0, strict=True, high=ahrs_hz),
+        "pos_sigma_m": t.number("pos_sigma_m", None, low=0),
+        "vel_sigma_mps": t.number("vel_sigma_mps", None, low=0),
+    }
+    t.done()
+    return GpsConfig(**{k: v for k, v in given.items() if v is not None})
+
+
+def _ahrs(t: _Table | None) -> AhrsConfig:
+    """[sensors.ahrs]: 1-sigma noise, degrees in the file, radians inside."""
+    if t is None:
+        return AhrsConfig()
+    heading = t.number("heading_sigma_deg", None, low=0)
+    yaw_rate = t.number("yaw_rate_sigma_degps", None, low=0)
+    given = {
+        "heading_sigma_rad": None if heading is None else math.radians(heading),
+        "yaw_rate_sigma_radps": None if yaw_rate is None else math.radians(yaw_rate),
+        "accel_sigma_mps2": t.number("accel_sigma_mps2", None, low=0),
+    }
+    t.done()
+    return AhrsConfig(**{k: v for k, v in given.items() if v is not None})
+
+
+def _lidar_noise(t: _Table | None) -> LidarNoise:
+    """[sensors.lidar]: the simulated LiDAR's imperfections, named as in LidarNoise."""
+    if t is None:
+        return LidarNoise()
+    given = {
+        "range_sigma_m": t.number("range_sigma_m", None, low=0),
+        "dropout": t.number("dropout", None, low=0, high=1),
+        "water_speckle": t.number("water_speckle", None, low=0, high=1),
+        "water_ripple_m": t.number("water_ripple_m", None, low=0),
+        "spray_points": t.integer("spray_points", None, low=0),
+        "spray_length_m": t.number("spray_length_m", None, low=0),
+        "spray_height_m": t.number("spray_height_m", None, low=0),
+    }
+    t.done()
+    noise = LidarNoise(**{k: v for k, v in given.items() if v is not None})
+    if noise.dropout + noise.water_speckle > 1.0:
+        raise t.err("water_speckle", f"dropout + water_speckle must be <= 1 (both are chances "
+                    f"per return), got {noise.dropout:g} + {noise.water_speckle:g}")
+    return noise
+
+
+# -- controller options ----------------------------------------------------------------------
+def _controller_options(t: _Table, controller: str, d_p_m: float, params: BoatParams) -> dict:
+    """[controller.options], checked now so a bad value never reaches a run: the NMPC takes
+    NmpcConfig's fields by name plus `method` and `knows_current`; the baselines take none."""
+    if controller != "nmpc":
+        if t.data:
+            raise t.err(sorted(t.data)[0], f"the {controller} controller takes no options "
+                        "(its planner and tracker are set as in the paper)")
+        return {}
+    import typing
+
+    from controller.nmpc import NmpcConfig
+    from controller.nmpc_controller import METHODS
+
+    hints = typing.get_type_hints(NmpcConfig)
+    settable = sorted(set(hints) - {"boat", "separation_m"})
+    config = {}
+    for key in sorted(t.data):
+        if key == "method":
+            t.string("method", choices=METHODS)
+        elif key == "knows_current":
+            t.boolean("knows_current")
+        elif key == "separation_m":
+            raise t.err(key, "d_p is set by controller.d_p_m")
+        elif key == "boat":
+            raise t.err(key, "the controller's model is set in [controller.boat]")
+        elif key in settable:
+            config[key] = _option_value(t, key, hints[key])
+        else:
+            raise t.err(key, "unknown NMPC option (known: method, knows_current, "
+                        f"{', '.join(settable)})")
+    try:
+        NmpcConfig(separation_m=d_p_m, boat=params, **config)
+    except (InputError, TypeError, ValueError) as exc:
+        named = [k for k in config if f"'{k}'" in str(exc)]
+        where = f"controller.options.{named[0]}" if named else "controller.options"
+        raise InputError(f"{t.source}: field {where!r}: {exc}") from None
+    t.done()
+    return dict(t.data)
+
+
+def _option_value(t: _Table, key: str, hint):
+    """An option's value checked against its NmpcConfig type: a whole number, a number, or a
+    list of numbers (of a fixed length where the type says so)."""
+    import types
+    import typing
+
+    v = t.raw(key)
+    args = [a for a in typing.get_args(hint) if a is not type(None)]
+    if typing.get_origin(hint) in (typing.Union, types.UnionType) and len(args) == 1:
+        hint = args[0]  # "or None": TOML has no null, so a number
+    if hint is int:
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise t.err(key, f"expected a whole number, got {v!r}")
+    elif hint is float:
+        if not _is_number(v):
+            raise t.err(key, f"expected a number, got {v!r}")
+    elif typing.get_origin(hint) is tuple:
+        size = None if (len(typing.get_args(hint)) == 2 and typing.get_args(hint)[1] is Ellipsis) \
+            else len(typing.get_args(hint))
+        if not isinstance(v, list) or not all(map(_is_number, v)):
+            raise t.err(key, f"expected a list of numbers, got {v!r}")
+        if size is not None and len(v) != size:
+            raise t.err(key, f"expected {size} numbers, got {len(v)}")
+        return tuple(v)
+    return v
