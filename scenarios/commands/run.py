@@ -2,9 +2,21 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 from pathlib import Path
+
+
+def seed_arg(text: str) -> int:
+    """--seed: a whole number >= 0 (numpy's generators take no negative seeds)."""
+    try:
+        seed = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}") from None
+    if seed < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {seed}")
+    return seed
 
 
 def register(sub) -> None:
@@ -12,12 +24,14 @@ def register(sub) -> None:
         "run", help="run a canal scenario in closed loop (FMU plant, simulated sensors)",
         description="Run a scenario: the boat FMU as plant, GPS/AHRS into an EKF, LiDAR "
         "detections (or known walls) into the controller at 10 Hz. Writes log.csv (as it "
-        "goes), summary.json, timing.json and PNG plots to --out.",
+        "goes), summary.json, timing.json and PNG plots to --out. Exits 0 when the goal is "
+        "reached and every pass criterion holds, else 1.",
     )
     p.add_argument("scenario", help="scenario file (TOML), e.g. scenarios/pohang.toml")
     p.add_argument("--controller", help="override the scenario's controller")
     p.add_argument("--out", default=None, help="output folder (default runs/<scenario>-<controller>)")
-    p.add_argument("--seed", type=int, default=None, help="noise seed (default: the scenario's)")
+    p.add_argument("--seed", type=seed_arg, default=None,
+                   help="noise seed, a whole number >= 0 (default: the scenario's)")
     p.add_argument("--plant", default="fmu", help="plant: fmu (default), python-model, mavlink-sim")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--serial-perception", action="store_true",
@@ -48,6 +62,15 @@ def run(args) -> int:
     failed = check_criteria(scenario, s)
     for f in failed:
         print(f"criterion failed: {f}")
-    print(f"results in {out}/: summary.json, timing.json, log.csv, trajectory.png, "
-          f"separation.png, states.png")
-    return 0 if s["reached_goal"] else 1
+    print(f"results in {out}/: {', '.join(_written(out, args))}")
+    return 0 if s["reached_goal"] and not failed else 1
+
+
+def _written(out: Path, args) -> list[str]:
+    """The files this run writes into `out` (plots only when asked for), that exist."""
+    names = ["summary.json", "timing.json", "log.csv", "segments.csv"]
+    if args.plant == "mavlink-sim":
+        names.append("mavlink.tlog")
+    if not args.no_plots:
+        names += ["trajectory.png", "separation.png", "states.png"]
+    return [n for n in names if (out / n).exists()]
