@@ -2,7 +2,7 @@
 
 One control period (0.1 s) is: perceive segments, run the controller on the estimated state,
 then step the plant in IMU periods (0.01 s) with the command held, fusing AHRS every IMU
-period and GPS every 0.2 s (a plant with its own estimate, such as an autopilot's EKF over
+period and GPS at its rate (5 Hz by default) (a plant with its own estimate, such as an autopilot's EKF over
 MAVLink, replaces the sensors and the filter). Every control step is appended to the log as it
 happens, so an interrupted run loses nothing; the summary and plots come at the end.
 """
@@ -62,8 +62,9 @@ class LoopConfig:
     desired_separation_m: float  # R_b + d_p
     goal_radius_m: float = 5.0
     control_period_s: float = 0.1
-    imu_period_s: float = 0.01
-    gps_period_s: float = 0.2
+    imu_period_s: float = 0.01  # the plant's step and the AHRS period
+    gps: GpsConfig = GpsConfig()  # rate (5 Hz) and noise of the RTK fix
+    ahrs: AhrsConfig = AhrsConfig()  # noise of the AHRS
     current_ne: tuple = (0.0, 0.0)
     seed: int = 0
     snapshot_times_s: tuple = ()  # instants at which to keep the plan for plots
@@ -106,12 +107,12 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
     path = Polyline(cfg.waypoints)
     goal = np.asarray(cfg.waypoints, float)[-1]
     n_imu = max(1, int(round(cfg.control_period_s / cfg.imu_period_s)))
-    gps_every = max(1, int(round(cfg.gps_period_s / cfg.imu_period_s)))
+    gps_every = max(1, int(round(1.0 / (cfg.gps.rate_hz * cfg.imu_period_s))))
     n_steps = int(math.floor(cfg.duration_s / cfg.control_period_s + 1e-9))
     snapshot_steps = {int(round(t / cfg.control_period_s)) for t in cfg.snapshot_times_s}
 
-    gps = GpsSensor(GpsConfig(), seed=cfg.seed * 7919 + 1)
-    ahrs = AhrsSensor(AhrsConfig(), seed=cfg.seed * 7919 + 2)
+    gps = GpsSensor(cfg.gps, seed=cfg.seed * 7919 + 1)
+    ahrs = AhrsSensor(cfg.ahrs, seed=cfg.seed * 7919 + 2)
     out: PlantOutput = plant.reset(np.asarray(state0, float), cfg.current_ne)
     nav = NavigationFilter(out.state)
     own_estimate = out.estimate is None  # else the plant estimates (an autopilot's EKF)
@@ -121,6 +122,8 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
     snapshots: list[Snapshot] = []
     status, reached = "time limit", False
     contact = metrics.HullContact(cfg.outlines)
+    canal_width = metrics.CanalWidth(cfg.outlines)
+    rows_width: list[tuple[float, float, float]] = []
     collided = False
     wall0 = time.perf_counter()
     with RunLog(out_dir / "log.csv", out_dir / "segments.csv") as log:
@@ -145,10 +148,12 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
             rate = (command - prev) / cfg.control_period_s
             clear = metrics.clearance(out.state[None, :3], cfg.outlines)[0]
             xt = path.cross_track(out.state[:2])
+            width = canal_width.at(out.state)
             log.write_step(
                 t, out.state, est, command, rate, out.actuators, clear, xt,
-                (t2 - t1) * 1e3, decision, segs,
+                (t2 - t1) * 1e3, decision, segs, width,
             )
+            rows_width.append(width)
             rows_t.append(t)
             rows_clear.append(clear)
             rows_cmd.append(command)
@@ -210,6 +215,12 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
         "final_distance_to_goal_m": _round(float(np.hypot(*(out.state[:2] - goal)))),
         "steps": len(rows_t),
     }
+    # separation by place: kept where the canal allows it, the middle where it does not
+    widths = np.array(rows_width, float).reshape(-1, 3)
+    by_place = metrics.separation_by_place(clear, widths[:, 0], widths[:, 1], widths[:, 2],
+                                           cfg.desired_separation_m, cfg.control_period_s)
+    summary["narrow_below_m"] = 2 * cfg.desired_separation_m
+    summary.update({k: _round(v) for k, v in by_place.items()})
     stats = metrics.TimingStats.of(solve_s)
     timing = {
         "controller": summary["controller"],

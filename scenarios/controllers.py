@@ -72,7 +72,8 @@ class NmpcController:
         return Decision(
             command=st.command, status=st.stats.status if st.stats.ok else f"fallback:{st.stats.fallback}",
             predicted=st.states, slack_m=st.max_slack_m, segments_used=segments,
-            stats={"qp_iterations": st.stats.qp_iterations, "fallback": st.stats.fallback},
+            stats={"qp_iterations": st.stats.qp_iterations, "fallback": st.stats.fallback,
+                   "segments_dropped": st.stats.segments_dropped},
         )
 
 

@@ -10,7 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controller.geometry import Polyline, distance_to_polylines, segments_cross
+from controller.geometry import Polyline, Segment, distance_to_polylines, segments_cross
+from controller.slack_reference import walls_abeam
 
 HULL_CIRCLE_OFFSETS_M = (2.0, -2.0)
 """Centres of the two hull circles along body x (bow p_b, stern p_s), as in the paper."""
@@ -69,6 +70,61 @@ class HullContact:
         d = self._a - np.asarray(pose[:2], float)
         local = np.stack([d[:, 0] * c + d[:, 1] * s, -d[:, 0] * s + d[:, 1] * c], axis=1)
         return bool(np.any(np.all(np.abs(local) <= self._half, axis=1)))
+
+
+class CanalWidth:
+    """The canal's free width abeam of the boat and the boat's offset from its middle, from
+    the true outlines (walls and obstacles), for the metrics of separation by place: where the
+    canal is at least 2 (R_b + d_p) wide the separation can be kept, where it is narrower the
+    best a boat can do is the middle.
+
+    Width is the distance to the nearest outline abeam to port plus to starboard (the nearest
+    point within 60 deg of the boat's beam, as `controller.slack_reference` measures it);
+    outlines farther than `reach_m` are not seen (width inf: open water).
+    """
+
+    def __init__(self, outlines, reach_m: float = 50.0):
+        rows = [Segment.from_endpoints(a, b).as_array()
+                for o in outlines for a, b in zip(np.asarray(o, float)[:-1], np.asarray(o, float)[1:])
+                if np.hypot(*(b - a)) > 1e-9]
+        self._segments = np.array(rows).reshape(-1, 4)
+        ends = [np.asarray(o, float).reshape(-1, 2) for o in outlines]
+        a = np.vstack([e[:-1] for e in ends if len(e) >= 2]) if ends else np.empty((0, 2))
+        b = np.vstack([e[1:] for e in ends if len(e) >= 2]) if ends else np.empty((0, 2))
+        keep = np.hypot(*(b - a).T) > 1e-9
+        self._lo, self._hi = np.minimum(a, b)[keep], np.maximum(a, b)[keep]
+        self.reach_m = float(reach_m)
+
+    def at(self, pose, offsets=HULL_CIRCLE_OFFSETS_M) -> tuple[float, float, float]:
+        """(width at the boat's origin, smallest width at the origin and the hull circle
+        centres, offset of the origin from the middle: + to starboard of it), metres."""
+        pose = np.asarray(pose, float)
+        reach = self.reach_m + max(abs(o) for o in offsets)
+        near = np.all((self._lo - reach <= pose[:2]) & (pose[:2] <= self._hi + reach), axis=1)
+        points = np.vstack([pose[:2], hull_circle_centres(pose[None, :3], offsets)[0]])
+        port, starboard = walls_abeam(points, np.full(len(points), pose[2]), self._segments[near])
+        port = np.where(port <= self.reach_m, port, np.inf)
+        starboard = np.where(starboard <= self.reach_m, starboard, np.inf)
+        width = port + starboard
+        offset = 0.5 * (port[0] - starboard[0]) if np.isfinite(width[0]) else 0.0
+        return float(width[0]), float(width.min()), float(offset)
+
+
+def separation_by_place(clearance_m, width_m, width_min_hull_m, offset_m,
+                        desired_m: float, dt: float) -> dict:
+    """Where the canal is at least 2 x `desired_m` wide over the whole hull, the smallest
+    hull-circle clearance; where it is narrower at the boat, how long and how far from the
+    middle the boat was. Arrays are per control step (clearance (N, 2))."""
+    clear = np.asarray(clearance_m, float).reshape(-1, 2).min(axis=1)
+    wide = np.asarray(width_min_hull_m, float) >= 2 * desired_m
+    narrow = np.asarray(width_m, float) < 2 * desired_m
+    off = np.abs(np.asarray(offset_m, float))[narrow]
+    return {
+        "min_clearance_where_wide_m": float(clear[wide].min()) if wide.any() else None,
+        "time_narrow_s": float(np.count_nonzero(narrow) * dt),
+        "mean_centre_offset_narrow_m": float(off.mean()) if off.size else None,
+        "max_centre_offset_narrow_m": float(off.max()) if off.size else None,
+    }
 
 
 def time_below(values, threshold: float, dt: float) -> float:

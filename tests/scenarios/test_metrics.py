@@ -56,3 +56,42 @@ def test_hull_contact_sees_a_wall_inside_the_hull_rectangle():
     pier = [np.array([[0.5, 0.5], [0.5, 20.0]])]
     assert metrics.HullContact(pier).touches([0.0, 0.0, 0.0])
     assert not metrics.HullContact(pier).touches([0.0, -2.0, 0.0])
+
+
+def _canal_with_a_step():
+    """A canal along north, 14 m wide up to x = 300, then 12 m (the east wall steps in)."""
+    x = np.arange(-100.0, 601.0, 2.0)
+    west = np.column_stack([x, np.full(len(x), -7.0)])
+    east = np.column_stack([x, np.where(x < 300, 7.0, 5.0)])
+    return [west, east]
+
+
+def test_canal_width_abeam_and_the_offset_from_the_middle():
+    width = metrics.CanalWidth(_canal_with_a_step())
+    assert width.at([50.0, 0.0, 0.0]) == pytest.approx((14.0, 14.0, 0.0))
+    # 1 m east of the middle heading north: to starboard of it; heading south: to port
+    assert width.at([50.0, 1.0, 0.0])[2] == pytest.approx(1.0)
+    assert width.at([50.0, 1.0, np.pi])[2] == pytest.approx(-1.0)
+    # turned 20 deg: still the distances to the walls, not along the beam
+    assert width.at([50.0, 0.0, np.radians(20)])[0] == pytest.approx(14.0)
+    assert width.at([400.0, -1.0, 0.0]) == pytest.approx((12.0, 12.0, 0.0))
+    # 1 m before the step: the bow circle is already in the narrow part
+    w, w_hull, _ = width.at([299.0, 0.0, 0.0])
+    assert w > 12.0 and w_hull == pytest.approx(12.0)
+    # open water on one side is infinitely wide (beyond reach_m)
+    lone = metrics.CanalWidth([_canal_with_a_step()[0]], reach_m=30.0)
+    assert lone.at([50.0, 0.0, 0.0])[0] == np.inf
+
+
+def test_separation_by_place_splits_wide_and_narrow_stretches():
+    clearance = np.array([[6.5, 6.6], [7.0, 6.9], [4.4, 4.5], [4.6, 4.5], [5.0, 5.1]])
+    width = np.array([15.0, 15.0, 9.0, 9.0, 13.0])
+    hull = np.array([15.0, 14.5, 9.0, 9.0, 9.5])  # the last: the bow in the narrow part
+    offset = np.array([2.0, 0.0, 0.1, -0.3, 1.0])
+    got = metrics.separation_by_place(clearance, width, hull, offset, 7.0, 0.1)
+    assert got["min_clearance_where_wide_m"] == pytest.approx(6.5)
+    assert got["time_narrow_s"] == pytest.approx(0.3)  # width < 14 at the boat: 3 steps
+    assert got["mean_centre_offset_narrow_m"] == pytest.approx((0.1 + 0.3 + 1.0) / 3)
+    assert got["max_centre_offset_narrow_m"] == pytest.approx(1.0)
+    none = metrics.separation_by_place(clearance[:2], width[:2], hull[:2], offset[:2], 7.0, 0.1)
+    assert none["mean_centre_offset_narrow_m"] is None and none["time_narrow_s"] == 0.0
