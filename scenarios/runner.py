@@ -42,9 +42,12 @@ def make_perception(scenario: Scenario, parallel: bool | None = None):
         from scenarios.perception import KnownWalls
 
         return KnownWalls(scenario.world, scenario.known_walls_range_m, AIR_DRAFT_M)
+    from scenarios.lidar import LidarConfig
     from scenarios.perception_pipeline import DelayedLidarPerception
 
-    return DelayedLidarPerception(scenario.world, seed=scenario.seed, parallel=parallel)
+    return DelayedLidarPerception(scenario.world, seed=scenario.seed,
+                                  config=LidarConfig(noise=scenario.lidar_noise),
+                                  parallel=parallel)
 
 
 def make_controller(scenario: Scenario, name: str | None = None):
@@ -106,7 +109,7 @@ def run_scenario(scenario: Scenario, out_dir: Path, controller: str | None = Non
         duration_s=scenario.duration_s, waypoints=scenario.waypoints,
         outlines=tuple(scenario.world.surfaces(AIR_DRAFT_M)),
         desired_separation_m=R_B_M + scenario.d_p_m, goal_radius_m=scenario.goal_radius_m,
-        current_ne=scenario.current_ne, seed=seed,
+        current_ne=scenario.current_ne, seed=seed, gps=scenario.gps, ahrs=scenario.ahrs,
         snapshot_times_s=scenario.snapshot_times_s or _default_snapshots(scenario),
     )
     try:
@@ -157,4 +160,22 @@ def check_criteria(scenario: Scenario, summary: dict) -> list[str]:
                       f"{c.max_time_below_desired_s} s")
     if c.max_mean_cross_track_m is not None and (s["mean_cross_track_m"] or 0) > c.max_mean_cross_track_m:
         failed.append(f"mean cross-track {s['mean_cross_track_m']} m > {c.max_mean_cross_track_m} m")
+    # a criterion about a kind of place the run never reached fails: it checked nothing
+    width = s["narrow_below_m"]
+    wide = s["min_clearance_where_wide_m"]
+    if c.min_clearance_where_wide_m is not None:
+        if wide is None:
+            failed.append(f"min_clearance_where_wide_m: the boat was never where the canal is "
+                          f"at least {width:g} m wide")
+        elif wide < c.min_clearance_where_wide_m:
+            failed.append(f"min clearance where the canal is at least {width:g} m wide "
+                          f"{wide} m < {c.min_clearance_where_wide_m} m")
+    offset = s["mean_centre_offset_narrow_m"]
+    if c.max_mean_centre_offset_narrow_m is not None:
+        if offset is None:
+            failed.append(f"max_mean_centre_offset_narrow_m: the boat was never where the canal "
+                          f"is narrower than {width:g} m")
+        elif offset > c.max_mean_centre_offset_narrow_m:
+            failed.append(f"mean offset from the middle where the canal is narrower than "
+                          f"{width:g} m {offset} m > {c.max_mean_centre_offset_narrow_m} m")
     return failed
