@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 BREADTH_M = 2.6  # the paper's boat
+HULL_RADIUS_M = 3.0  # R_b of the hull circles
 
 
 def read_log(path: Path) -> dict[str, np.ndarray]:
@@ -32,55 +33,103 @@ def read_log(path: Path) -> dict[str, np.ndarray]:
     return cols
 
 
-def _figure(*args, **kwargs):
+def _pyplot():
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    return plt
+
+
+def _figure(*args, **kwargs):
+    plt = _pyplot()
     return plt, plt.subplots(*args, **kwargs)
 
 
-def plot_trajectory(run_dir: Path, outlines, waypoints, out: Path, title: str = "") -> Path:
+def plot_trajectory(run_dir: Path, outlines, waypoints, out: Path, title: str = "",
+                    window_m: float = 70.0) -> Path:
+    """The whole map with the track, and beside it a close-up of each snapshot (a square of
+    `window_m` around the boat): the segments the controller saw, its predicted horizon and
+    the hull circles, as the paper's snapshot figures."""
     log = read_log(run_dir / "log.csv")
     snaps = json.loads((run_dir / "snapshots.json").read_text())
-    plt, (fig, ax) = _figure(figsize=(10, 8))
-    for i, line in enumerate(outlines):
-        line = np.asarray(line)
-        ax.plot(line[:, 1], line[:, 0], color="0.25", lw=1.5, label="walls" if i == 0 else None)
-    wp = np.asarray(waypoints)
-    ax.plot(wp[:, 1], wp[:, 0], "--", color="tab:blue", lw=1, label="waypoint path")
-    ax.plot(log["true_y_m"], log["true_x_m"], color="tab:green", lw=1.5, label="boat (true)")
-    labelled = False
+    n = len(snaps)
+    cols = 2 if n > 1 else 1
+    rows = max(1, -(-n // cols))
+    plt = _pyplot()
+    fig = plt.figure(figsize=(4.2 + 4.2 * cols, 4.2 * rows if n else 6.0))
+    grid = fig.add_gridspec(rows, 1 + cols, width_ratios=[1.0] + [1.0] * cols)
+    overview = fig.add_subplot(grid[:, 0])
+    _draw_map(overview, outlines, waypoints, log)
+    overview.set_aspect("equal", adjustable="datalim")
     for j, sn in enumerate(snaps):
-        for xc, yc, th, ln in np.asarray(sn["segments"]).reshape(-1, 4):
-            dx, dy = 0.5 * ln * np.cos(th), 0.5 * ln * np.sin(th)
-            ax.plot([yc - dy, yc + dy], [xc - dx, xc + dx], color="k", lw=3, alpha=0.5,
-                    label=None if labelled else "segments seen by the controller")
-            labelled = True
-        if sn["predicted"]:
-            pred = np.asarray(sn["predicted"])
-            ax.plot(pred[:, 1], pred[:, 0], ".-", color="tab:orange", ms=3, lw=1,
-                    label="predicted horizon" if j == 0 else None)
         x, y = sn["state"][:2]
-        ax.annotate(f"t={sn['time_s']:.0f}s", (y, x), fontsize=8)
-    ax.set_aspect("equal")
-    ax.set_xlabel("east [m]")
-    ax.set_ylabel("north [m]")
-    ax.set_title(title or "trajectory")
-    ax.legend(loc="best", fontsize=8)
+        overview.annotate(str(j + 1), (y, x), fontsize=9, color="tab:red", weight="bold",
+                          xytext=(4, 0), textcoords="offset points")
+    overview.set_title(title or "trajectory", fontsize=10)
+    overview.legend(loc="best", fontsize=7)
+    for j, sn in enumerate(snaps):
+        ax = fig.add_subplot(grid[j // cols, 1 + j % cols])
+        _draw_map(ax, outlines, waypoints, log, legend=False)
+        _draw_snapshot(ax, sn, labels=(j == 0))
+        x, y = sn["state"][:2]
+        ax.set_xlim(y - window_m / 2, y + window_m / 2)
+        ax.set_ylim(x - window_m / 2, x + window_m / 2)
+        ax.set_aspect("equal", adjustable="box")
+        ax.set_title(f"{j + 1}: t = {sn['time_s']:.0f} s", fontsize=9)
+        if j == 0:
+            ax.legend(loc="lower left", fontsize=6)
     fig.tight_layout()
     fig.savefig(out, dpi=110)
     plt.close(fig)
     return out
 
 
+def _draw_map(ax, outlines, waypoints, log, legend: bool = True) -> None:
+    for i, line in enumerate(outlines):
+        line = np.asarray(line)
+        ax.plot(line[:, 1], line[:, 0], color="0.25", lw=1.2, label="walls" if i == 0 else None)
+    wp = np.asarray(waypoints)
+    ax.plot(wp[:, 1], wp[:, 0], "--", color="tab:blue", lw=0.9, label="waypoint path")
+    ax.plot(log["true_y_m"], log["true_x_m"], color="tab:green", lw=1.2, label="boat (true)")
+    ax.set_xlabel("east [m]", fontsize=8)
+    ax.set_ylabel("north [m]", fontsize=8)
+    ax.tick_params(labelsize=7)
+
+
+def _draw_snapshot(ax, sn: dict, labels: bool) -> None:
+    """Segments seen, predicted horizon and the hull circles (R_b = 3 m) at one instant."""
+    for i, (xc, yc, th, ln) in enumerate(np.asarray(sn["segments"]).reshape(-1, 4)):
+        dx, dy = 0.5 * ln * np.cos(th), 0.5 * ln * np.sin(th)
+        ax.plot([yc - dy, yc + dy], [xc - dx, xc + dx], color="tab:purple", lw=2.5, alpha=0.7,
+                label="segments seen" if labels and i == 0 else None)
+    if sn["predicted"]:
+        pred = np.asarray(sn["predicted"])
+        ax.plot(pred[:, 1], pred[:, 0], ".-", color="tab:orange", ms=3, lw=1,
+                label="predicted horizon" if labels else None)
+    x, y, psi = sn["state"][:3]
+    for k, off in enumerate((2.0, -2.0)):
+        cx, cy = x + off * np.cos(psi), y + off * np.sin(psi)
+        ax.add_patch(_circle((cy, cx), HULL_RADIUS_M,
+                             label="hull circles" if labels and k == 0 else None))
+
+
+def _circle(centre, radius, label=None):
+    from matplotlib.patches import Circle
+
+    return Circle(centre, radius, fill=False, color="tab:red", lw=1.0, label=label)
+
+
 def plot_separation(runs: dict[str, Path], desired_m: float, out: Path, title: str = "") -> Path:
     """Separation over time for one run or several (a comparison), both hull circles each."""
     plt, (fig, ax) = _figure(figsize=(10, 4))
     colors = ["tab:blue", "tab:green", "tab:red", "tab:purple"]
-    for color, (name, run_dir) in zip(colors, runs.items()):
+    for i, (color, (name, run_dir)) in enumerate(zip(colors, runs.items())):
         log = read_log(Path(run_dir) / "log.csv")
+        if i == 0 and "canal_width_m" in log:
+            _shade_narrow(ax, log["time_s"], log["canal_width_m"] < 2 * desired_m,
+                          f"canal narrower than {2 * desired_m:g} m")
         ax.plot(log["time_s"], log["clearance_bow_m"], ":", color=color, label=f"{name}: p_b (bow)")
         ax.plot(log["time_s"], log["clearance_stern_m"], "-", color=color, label=f"{name}: p_s (stern)")
     ax.axhline(desired_m, color="k", ls="--", lw=1, label=f"desired R_b + d_p = {desired_m:g} m")
@@ -94,6 +143,14 @@ def plot_separation(runs: dict[str, Path], desired_m: float, out: Path, title: s
     fig.savefig(out, dpi=110)
     plt.close(fig)
     return out
+
+
+def _shade_narrow(ax, t, narrow, label: str) -> None:
+    """Grey bands over the times where `narrow` holds."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], narrow.astype(int), [0]])))
+    dt = float(t[1] - t[0]) if len(t) > 1 else 0.1
+    for k, (a, b) in enumerate(zip(edges[::2], edges[1::2])):
+        ax.axvspan(t[a], t[b - 1] + dt, color="0.88", lw=0, label=label if k == 0 else None)
 
 
 def plot_states(run_dir: Path, out: Path, title: str = "") -> Path:
