@@ -19,9 +19,9 @@ class NoPerception:
         return np.empty((0, 4))
 
 
-def run(tmp_path, seed=1, controller=None, duration=200.0):
+def run(tmp_path, seed=1, controller=None, duration=200.0, **sensors):
     cfg = LoopConfig(duration_s=duration, waypoints=WAYPOINTS, outlines=WALLS,
-                     desired_separation_m=5.0, seed=seed, snapshot_times_s=(10.0,))
+                     desired_separation_m=5.0, seed=seed, snapshot_times_s=(10.0,), **sensors)
     ctrl = controller or LosPidController(IDENTIFIED, WAYPOINTS)
     return run_closed_loop(ModelPlant(IDENTIFIED), ctrl, NoPerception(), [0, 1.0, 0, 0, 0, 0],
                            cfg, tmp_path, scenario_name="straight")
@@ -102,3 +102,36 @@ def test_plots_are_written_from_the_run_directory(tmp_path):
     ]
     for out in outs:
         assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 10_000
+
+
+def test_the_gps_settings_reach_the_filter(tmp_path):
+    """A 1 Hz fix with 1 m noise leaves the estimate metres off; the RTK default, centimetres."""
+    from scenarios.plots import read_log
+    from scenarios.sensors import GpsConfig
+
+    def position_error(folder, **sensors):
+        run(folder, duration=60.0, **sensors)
+        log = read_log(folder / "log.csv")
+        error = np.hypot(log["est_x_m"] - log["true_x_m"], log["est_y_m"] - log["true_y_m"])
+        return float(error[100:].mean())
+
+    rtk = position_error(tmp_path / "rtk")
+    poor = position_error(tmp_path / "poor", gps=GpsConfig(rate_hz=1.0, pos_sigma_m=1.0,
+                                                           vel_sigma_mps=0.3))
+    assert rtk < 0.05 and poor > 0.2
+
+
+def test_the_canal_width_is_logged_and_summarised(tmp_path):
+    """16 m between the walls everywhere: never narrower than 2 x 5 m, so no narrow time, and
+    the clearance where wide is the run's minimum."""
+    from scenarios.plots import read_log
+
+    result = run(tmp_path / "a")
+    log = read_log(result.log_path)
+    assert np.allclose(log["canal_width_m"], 16.0)
+    assert np.allclose(log["canal_width_min_hull_m"], 16.0)
+    assert np.allclose(log["centre_offset_m"], log["true_y_m"], atol=1e-6)  # + to starboard (east)
+    s = result.summary
+    assert s["narrow_below_m"] == 10.0 and s["time_narrow_s"] == 0.0
+    assert s["min_clearance_where_wide_m"] == s["min_clearance_m"]
+    assert s["mean_centre_offset_narrow_m"] is None
