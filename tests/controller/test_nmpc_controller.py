@@ -293,7 +293,6 @@ def test_a_failed_warm_start_is_retried_from_the_safe_guess(monkeypatch):
     assert len(calls) == 2 and ctl.consecutive_failures == 0
 
 
-@pytest.mark.slow
 def test_rti_stays_within_0_2_m_of_converged_sqp_on_the_bend():
     from controller.nmpc_bench import bend_canal
 
