@@ -26,6 +26,9 @@ def register_bench(sub) -> None:
     p.add_argument("--narrow-m", type=float, default=9.0,
                    help="width of the narrow stretch in m (9; below 2 (R_b + d_p) = 10)")
     p.add_argument("--speed", type=float, default=2.0, help="target speed in m/s (2.0)")
+    p.add_argument("--segment-slots", type=int, default=None,
+                   help="segment slots of the OCP (default: NmpcConfig's, 16); each count is "
+                   "compiled once and cached")
     p.add_argument("--solvers", default="rti,sqp,ipopt",
                    help="comma list of rti, sqp, ipopt (all three)")
     p.add_argument("--qp-tol", type=float, default=None,
@@ -98,7 +101,10 @@ def run(args) -> int:
         raise InputError(f"--steps: need at least 10, got {args.steps}")
     if not 0 < args.narrow_m:
         raise InputError(f"--narrow-m: must be positive, got {args.narrow_m}")
-    config = NmpcConfig()
+    if args.segment_slots is not None and args.segment_slots < 1:
+        raise InputError(f"--segment-slots: need at least 1, got {args.segment_slots}")
+    config = NmpcConfig() if args.segment_slots is None \
+        else NmpcConfig(segment_slots=args.segment_slots)
     qp = QpOptions() if args.qp_tol is None else QpOptions(tol=args.qp_tol)
     canal = bend_canal(narrow_m=args.narrow_m)
     x0, act0 = np.array([0.0, 0.0, 0.0, args.speed, 0.0, 0.0]), np.array([47.0, 0.0])
