@@ -222,43 +222,81 @@ class CanalWorld:
 
     # -- queries ------------------------------------------------------------------------
     @cached_property
-    def water_ring(self) -> np.ndarray | None:
-        """The water as one polygon (K, 2): two walls joined at their ends, the joins being the
-        canal's open ends. None when there are not exactly two walls or the ring crosses itself."""
+    def _water(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """(ring, open_a, open_b): the water as one polygon, two walls joined at their ends,
+        and the joins that are the canal's open ends (segments open_a[i] -> open_b[i]).
+
+        Only when the two walls are the two banks of one stretch: land behind each, outside
+        the ring, and each open end across the canal (within 30 deg of square to the walls at
+        both its ends). A bank in two pieces, or a quay opposite a longer wall, would give a
+        ring that cuts off open water; those worlds go by `_reachable_from_centre_line`.
+        """
         if len(self.walls) != 2:
             return None
         a, b = self.walls[0].points, self.walls[1].points
         ends_near = np.hypot(*(a[-1] - b[-1])) + np.hypot(*(b[0] - a[0]))
         ends_far = np.hypot(*(a[-1] - b[0])) + np.hypot(*(b[-1] - a[0]))
-        ring = np.vstack([a, b[::-1] if ends_near <= ends_far else b])
+        b = b[::-1] if ends_near <= ends_far else b
+        ends = [(a[-1], b[0], a[-2] - a[-1], b[1] - b[0]),  # join, and the walls' legs there
+                (b[-1], a[0], b[-2] - b[-1], a[1] - a[0])]
+        open_a, open_b = [], []
+        for p, q, leg_p, leg_q in ends:
+            join = q - p
+            length = float(np.hypot(*join))
+            if length <= ON_WALL_M:
+                continue  # the walls meet: a closed end
+            for leg in (leg_p, leg_q):
+                if abs(float(join @ leg)) > 0.5 * length * float(np.hypot(*leg)):
+                    return None  # not across the canal
+            open_a.append(p)
+            open_b.append(q)
+        ring = np.vstack([a, b])
         keep = np.hypot(*(ring - np.roll(ring, 1, axis=0)).T) > ON_WALL_M  # walls that meet
         ring = ring[keep]
         if len(ring) < 3 or polyline_self_touch(np.vstack([ring, ring[:1]]), ON_WALL_M, closed=True):
             return None
-        return ring
+        for wall in self.walls:  # land behind each wall lies outside the ring, water inside
+            k = len(wall.points) // 2
+            p, q = wall.points[k - 1], wall.points[k]
+            d = (q - p) / np.hypot(*(q - p))
+            right = np.array([-d[1], d[0]])  # to starboard of the wall's direction (NED)
+            step = 1e-3 * wall.land_sign * right
+            land, water = points_in_polygon(np.array([(p + q) / 2 + step, (p + q) / 2 - step]),
+                                            ring, 0.0)
+            if land or not water:
+                return None
+        return ring, np.array(open_a).reshape(-1, 2), np.array(open_b).reshape(-1, 2)
+
+    @property
+    def water_ring(self) -> np.ndarray | None:
+        """The water as one polygon (K, 2) when the two walls are the banks of one stretch
+        (`_water`), else None."""
+        return None if self._water is None else self._water[0]
 
     def off_water(self, points) -> list[str | None]:
         """For each (x, y) point: None if it lies on the open water, else why not ("outside
         the canal", "on wall 'left'", "inside obstacle 'pier'"). Bridges do not count.
 
-        With two walls the water is `water_ring`: a point on a wall is off the water, a point
-        on an open end is on it. Otherwise the way from the nearest centre-line point must not
-        touch a wall, nor pass the centre line's ends; with neither, only walls and obstacles
-        under the point are found.
+        With two walls that are the banks of one stretch the water is `water_ring`: a point
+        on a wall is off the water, a point on an open end is on it. Otherwise the way from
+        the nearest centre-line point must not touch a wall, nor pass the centre line's ends;
+        with no centre line, a point must lie on the water side of its nearest wall.
         """
         pts = np.asarray(points, float).reshape(-1, 2)
         reasons: list[str | None] = [None] * len(pts)
         a, b = polyline_legs(self.wall_polylines())
         owner = np.concatenate([np.full(len(w.points) - 1, i) for i, w in enumerate(self.walls)])
         dist = point_segment_distance(pts, a, b)
-        ring = self.water_ring
-        if ring is not None:
-            k = len(self.walls[0].points)
-            ends_a, ends_b = ring[[k - 1, -1]], ring[[k, 0]]
-            at_end = point_segment_distance(pts, ends_a, ends_b).min(axis=1) <= ON_WALL_M
+        if self._water is not None:
+            ring, ends_a, ends_b = self._water
+            at_end = np.zeros(len(pts), bool)
+            if len(ends_a):
+                at_end = point_segment_distance(pts, ends_a, ends_b).min(axis=1) <= ON_WALL_M
             inside = points_in_polygon(pts, ring, ON_WALL_M) | at_end
-        else:
+        elif self.centre_line is not None:
             inside = np.array([self._reachable_from_centre_line(p, a, b) for p in pts], bool)
+        else:
+            inside = self._water_side_of_nearest_wall(pts, a, b, owner, dist)
         for n, p in enumerate(pts):
             hit = [o for o in self.obstacles if o.z_bottom_m == 0 and o.contains(p)[0]]
             if dist[n].min() <= ON_WALL_M:
@@ -268,6 +306,20 @@ class CanalWorld:
             elif hit:
                 reasons[n] = f"inside obstacle {hit[0].name!r}"
         return reasons
+
+    def _water_side_of_nearest_wall(self, pts, a, b, owner, dist) -> np.ndarray:
+        """(N,) mask: each point is on the water side of the wall nearest it (the side away
+        from its `land_side`). At a vertex two legs are equally near: the one the point lies
+        most squarely off decides (a corner's outside stays outside)."""
+        d = b - a
+        length = np.hypot(d[:, 0], d[:, 1])
+        cross = (d[:, 0] * (pts[:, 1:2] - a[:, 1]) - d[:, 1] * (pts[:, 0:1] - a[:, 0])) / length
+        sign = np.array([self.walls[i].land_sign for i in owner])
+        near = dist <= dist.min(axis=1, keepdims=True) + 1e-9
+        score = np.where(near, np.abs(cross), -np.inf)
+        leg = np.argmax(score, axis=1)
+        rows = np.arange(len(pts))
+        return cross[rows, leg] * sign[leg] < 0.0  # cross > 0: to starboard of the leg
 
     def _reachable_from_centre_line(self, p, a, b) -> bool:
         """No wall touches the way from the nearest centre-line point to p, and p is not past

@@ -263,3 +263,37 @@ def test_demo_canal_has_bends_width_changes_and_a_pier():
     assert all(1.0 <= w.height_m <= 3.0 for w in world.walls)
     for a, b in zip(world.walls[:2], world.walls[1:3]):
         assert np.allclose(a.points[-1], b.points[0])
+
+
+def test_two_walls_that_are_not_the_two_banks_of_one_stretch_make_no_ring():
+    """A quay opposite a longer wall, or one bank in two pieces: a ring through their ends
+    would cut off open water, so the points go by the water side of the nearest wall."""
+    west = Wall([[0, -10], [100, -10]], name="west")
+    quay = Wall([[40, 10], [60, 10]], land_side="right", name="quay")
+    world = CanalWorld.from_walls([west, quay])
+    assert world.water_ring is None
+    assert world.off_water([[10, 0], [90, 0], [50, 12], [50, -12], [150, 0]]) == [
+        None, None, "outside the canal", "outside the canal", None]
+    piece_a = Wall([[-10, 10], [50, 10]], land_side="right", name="a")
+    piece_b = Wall([[50, 10], [110, 20]], land_side="right", name="b")
+    world = CanalWorld.from_walls([piece_a, piece_b])
+    assert world.water_ring is None
+    # behind the corner where the pieces meet: outside, whichever leg is nearer
+    assert world.off_water([[5, 0], [95, 0], [50, 11], [80, 20], [52, 10.5]]) == [
+        None, None, "outside the canal", "outside the canal", "outside the canal"]
+
+
+@pytest.mark.parametrize("reverse", [False, True])
+def test_walls_that_meet_at_one_end_leave_the_other_end_open(reverse):
+    """A dead end at the south: the walls meet there, the north end is the open one, however
+    the walls are drawn."""
+    west = [[-10, 0], [-10, -10], [110, -10]]
+    east = [[-10, 0], [-10, 10], [110, 10]]
+    sides = ("left", "right")
+    if reverse:
+        west, east, sides = west[::-1], east[::-1], ("right", "left")
+    world = CanalWorld.from_walls([Wall(west, land_side=sides[0], name="west"),
+                                   Wall(east, land_side=sides[1], name="east")])
+    assert world.water_ring is not None
+    assert world.off_water([[5, 0], [110, 0], [111, 0], [-11, 0]]) == [
+        None, None, "outside the canal", "outside the canal"]
