@@ -13,8 +13,10 @@ from __future__ import annotations
 
 import hashlib
 import os
+import platform
 import shutil
 import subprocess
+import sys
 import tempfile
 import time
 import warnings
@@ -62,9 +64,10 @@ def generate_c(function: ca.Function) -> str:
 
 
 def cache_key(code: str, flags: list[str]) -> str:
-    """24 hex digits of the code, the compiler flags and the CasADi version."""
+    """24 hex digits of the code, the compiler flags, the CasADi version and the platform (a
+    cache folder copied from another machine must not hand over a foreign library)."""
     h = hashlib.sha256()
-    for part in (code, "\0".join(flags), ca.__version__):
+    for part in (code, "\0".join(flags), ca.__version__, sys.platform, platform.machine()):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()[:24]
@@ -78,16 +81,17 @@ def library_path(name: str, code: str, flags: tuple[str, ...] = DEFAULT_FLAGS,
 
 
 def build_library(name: str, code: str, flags: tuple[str, ...] = DEFAULT_FLAGS,
-                  link: tuple[str, ...] = ("-lm",), directory: Path | None = None
-                  ) -> tuple[Path, bool, float]:
-    """Compile C `code` into a cached shared library: (path, cache_hit, compile seconds).
+                  link: tuple[str, ...] = ("-lm",), directory: Path | None = None,
+                  rebuild: bool = False) -> tuple[Path, bool, float]:
+    """Compile C `code` into a cached shared library: (path, cache_hit, compile seconds);
+    `rebuild` compiles over a cached one (that did not load).
 
     Raises OSError or CalledProcessError when it is not cached and there is no compiler or
     it fails.
     """
     directory = directory or cache_dir()
     library = library_path(name, code, flags, link, directory)
-    if library.exists():
+    if library.exists() and not (rebuild and compiler() is not None):
         return library, True, 0.0
     cc = compiler()
     if cc is None:
@@ -109,10 +113,17 @@ def compile_cached(function: ca.Function, flags: tuple[str, ...] = DEFAULT_FLAGS
                    directory: Path | None = None) -> CompiledFunction:
     """`function` as a compiled library from the cache, compiling it first if needed; the
     interpreted `function` itself, with a warning, when that is impossible."""
+    code = generate_c(function)
     try:
-        library, hit, seconds = build_library(function.name(), generate_c(function), flags,
-                                              directory=directory)
-        loaded = ca.external(function.name(), str(library))
+        library, hit, seconds = build_library(function.name(), code, flags, directory=directory)
+        try:
+            loaded = ca.external(function.name(), str(library))
+        except RuntimeError:
+            if not hit or compiler() is None:
+                raise
+            library, hit, seconds = build_library(function.name(), code, flags,
+                                                  directory=directory, rebuild=True)
+            loaded = ca.external(function.name(), str(library))
     except (OSError, RuntimeError, subprocess.CalledProcessError) as exc:
         detail = getattr(exc, "stderr", "") or str(exc)
         warnings.warn(f"cannot compile or load {function.name()}, running it interpreted "

@@ -32,10 +32,16 @@ def load_library() -> tuple[ctypes.CDLL, bool, float]:
     """The compiled shim (cache hit or fresh build): (library, cache_hit, compile seconds)."""
     code = resources.files("controller").joinpath("nmpc_hpipm.c").read_text()
     libdir = _casadi_dir()
-    path, hit, seconds = build_library(
-        "nmpc_hpipm", code, flags=("-O2", f"-I{libdir / 'include'}"),
-        link=(f"-L{libdir}", "-lhpipm", "-lblasfeo", f"-Wl,-rpath,{libdir}", "-lm"))
-    lib = ctypes.CDLL(str(path))
+    options = dict(flags=("-O2", f"-I{libdir / 'include'}"),
+                   link=(f"-L{libdir}", "-lhpipm", "-lblasfeo", f"-Wl,-rpath,{libdir}", "-lm"))
+    path, hit, seconds = build_library("nmpc_hpipm", code, **options)
+    try:
+        lib = ctypes.CDLL(str(path))
+    except OSError:
+        if not hit:
+            raise
+        path, hit, seconds = build_library("nmpc_hpipm", code, rebuild=True, **options)
+        lib = ctypes.CDLL(str(path))
     lib.nmpc_qp_create.restype = ctypes.c_void_p
     lib.nmpc_qp_create.argtypes = [ctypes.c_int] * 5 + [_c_int_p, ctypes.c_int, _c_int_p,
                                                          _c_double_p, _c_double_p, ctypes.c_int,

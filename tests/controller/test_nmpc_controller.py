@@ -190,14 +190,39 @@ def test_with_no_compiler_and_an_empty_cache_the_controller_runs_interpreted(mon
     assert ctl.step(X0, ACT0, canal.segments(), canal.waypoints, 2.0).stats.ok
 
 
-def test_a_library_that_does_not_load_falls_back_with_a_warning(tmp_path):
+def _tiny_function():
+    import casadi as ca
+
+    x = ca.SX.sym("x", 2)
+    return ca.Function("tiny", [x], [x * x])
+
+
+def _break_the_cached_library(fn, directory):
     from controller import codegen_cache
 
-    fn = NmpcController(CFG, method="ipopt").ocp.linearisation
     broken = codegen_cache.library_path(fn.name(), codegen_cache.generate_c(fn),
-                                        directory=tmp_path)
+                                        directory=directory)
     broken.parent.mkdir(parents=True, exist_ok=True)
     broken.write_bytes(b"not a shared library")
+    return broken
+
+
+def test_a_cached_library_that_does_not_load_is_rebuilt(tmp_path):
+    from controller import codegen_cache
+
+    fn = _tiny_function()
+    broken = _break_the_cached_library(fn, tmp_path)
+    info = codegen_cache.compile_cached(fn, directory=tmp_path)
+    assert info.compiled and not info.cache_hit and info.library == broken
+    assert float(info.function([3.0, 4.0])[1]) == 16.0
+
+
+def test_without_a_compiler_a_library_that_does_not_load_falls_back(tmp_path, monkeypatch):
+    from controller import codegen_cache
+
+    fn = _tiny_function()
+    _break_the_cached_library(fn, tmp_path)
+    monkeypatch.setattr(codegen_cache, "compiler", lambda: None)
     with pytest.warns(RuntimeWarning, match="cannot compile or load"):
         info = codegen_cache.compile_cached(fn, directory=tmp_path)
     assert not info.compiled and info.function is fn
