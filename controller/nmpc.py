@@ -91,8 +91,10 @@ class NmpcConfig:
 
         for f in fields(self):
             value = getattr(self, f.name)
-            if isinstance(value, (list, np.ndarray)):  # weights given as a list or an array
-                value = tuple(np.asarray(value).reshape(-1).tolist())
+            if isinstance(value, (list, np.ndarray)):
+                if not isinstance(f.default, tuple):
+                    bad(f.name, "expected a number")
+                value = tuple(np.asarray(value).reshape(-1).tolist())  # weights as a list
                 object.__setattr__(self, f.name, value)
             values = value if isinstance(value, tuple) else (value,)
             if f.name in ("boat", "terminal_factor") or value is None:

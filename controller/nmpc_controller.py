@@ -104,9 +104,9 @@ def _number(value, what: str) -> float:
     return x
 
 
-def top_speed_mps(boat) -> float:
-    """Steady surge speed at 100 % throttle in still water (c_eff 100^2 = drag)."""
-    a, b, f = -boat.Xuu, -boat.Xu, boat.c_eff * 100.0**2
+def top_speed_mps(boat, throttle_pct: float = 100.0) -> float:
+    """Steady surge speed at `throttle_pct` in still water (c_eff nT^2 = drag)."""
+    a, b, f = -boat.Xuu, -boat.Xu, boat.c_eff * float(throttle_pct)**2
     return float((-b + np.sqrt(b * b + 4 * a * f)) / (2 * a)) if a > 0 else f / max(b, 1e-9)
 
 
@@ -132,7 +132,7 @@ class NmpcController:
         self._lbw, self._ubw = self.ocp.bounds(np.zeros(NX_BOAT))
         self._x0_at = self.ocp.states_at[0]
         self._xy_at = self.ocp.states_at[:, :2]
-        self._top_speed = top_speed_mps(config.boat)
+        self._top_speed = top_speed_mps(config.boat, config.nT_max)
         self.compiled_info = None
         if method == "ipopt":
             from .ipopt import IpoptSolver
@@ -178,7 +178,7 @@ class NmpcController:
         speed = _number(target_speed_mps, "target_speed_mps")
         if not 0.0 <= speed <= self._top_speed:
             raise InputError(f"target_speed_mps: must lie in [0, {self._top_speed:.2f}] m/s "
-                             f"(the boat's top speed at 100 % throttle), got {speed:g}")
+                             f"(the boat's top speed at {c.nT_max:g} % throttle), got {speed:g}")
         elapsed = c.control_period_s if elapsed_s is None else _number(elapsed_s, "elapsed_s")
         if elapsed < 0:
             raise InputError(f"elapsed_s: must be a non-negative number of s, got {elapsed:g}")

@@ -37,8 +37,11 @@ def test_config_defaults_are_the_papers_table():
     ({"dnT_max": 0.0}, "positive"),
     ({"control_period_s": 2.0}, "step_s"),
     ({"separation_m": 0.0, "hull_radius_m": 0.05}, "min_half_axis"),
+    ({"slack_weight": [1e4]}, "'slack_weight': expected a number"),
+    ({"horizon": "25"}, "expected numbers"),
 ])
 def test_bad_config_is_a_clear_error(changes, words):
+    """Each a clear InputError; numpy numbers and lists of weights are fine (below)."""
     with pytest.raises(InputError, match=words):
         NmpcConfig(**changes)
 
@@ -71,6 +74,13 @@ def test_slots_prefer_the_walls_along_the_planned_path_to_those_behind():
     by_boat = select_segments(segs, [0, 0], n_slots=10, range_m=60.0)
     assert by_boat.slots[:, 0].min() < -10.0  # ranked from the boat: pieces behind the stern
     assert select_segments(segs[:4], [0, 0], n_slots=10, path=plan).dropped == 0
+
+
+def test_config_takes_numpy_numbers_and_lists_of_weights():
+    c = NmpcConfig(q_diag=[1, 1, 500, 10, 0, 1000, 0, 0], horizon=np.int64(20),
+                   step_s=np.float32(1.0), r_diag=np.array([1.0, 2.0]))
+    assert c.q_diag == (1, 1, 500, 10, 0, 1000, 0, 0) and c.r_diag == (1.0, 2.0)
+    assert c.horizon == 20 and hash(c) is not None
 
 
 @pytest.mark.parametrize("segments, words", [
