@@ -490,6 +490,14 @@ def parse_scenario(text: str, source: str = "<string>", path: Path | None = None
     options = _controller_options(ctrl.table("options") or _Table({}, "controller.options", source),
                                   controller, d_p, ctrl_params)
     ctrl.done()
+    from controller.nmpc_controller import top_speed_mps
+
+    throttle = options.get("nT_max", 100.0)
+    if target_speed > top_speed_mps(ctrl_params, throttle):
+        raise InputError(f"{source}: field 'route.target_speed_mps': {target_speed:g} m/s is "
+                         f"above the controller's boat's top speed, "
+                         f"{top_speed_mps(ctrl_params, throttle):.2f} m/s at {throttle:g} % "
+                         f"throttle")
 
     crit = doc.table("criteria") or _Table({}, "criteria", source)
     criteria = Criteria(
@@ -549,6 +557,10 @@ def _gps(t: _Table | None) -> GpsConfig:
         "pos_sigma_m": t.number("pos_sigma_m", None, low=0),
         "vel_sigma_mps": t.number("vel_sigma_mps", None, low=0),
     }
+    rate = given["rate_hz"]
+    if rate is not None and abs(ahrs_hz / rate - round(ahrs_hz / rate)) > 1e-9:
+        raise t.err("rate_hz", f"the fix comes every n-th AHRS sample ({ahrs_hz:g} Hz): the rate "
+                    f"must divide {ahrs_hz:g} Hz (e.g. 1, 2, 5, 10, 20), got {rate:g}")
     t.done()
     return GpsConfig(**{k: v for k, v in given.items() if v is not None})
 
@@ -590,6 +602,16 @@ def _lidar_noise(t: _Table | None) -> LidarNoise:
 
 
 # -- controller options ----------------------------------------------------------------------
+FIXED_BY_THE_LOOP = {
+    "control_period_s": "the closed loop runs every controller at 10 Hz (0.1 s)",
+    "hull_radius_m": "the hull circles (R_b = 3 m at +-2 m) are fixed: the clearance metrics "
+                     "and the desired separation R_b + d_p use them too",
+    "hull_offsets_m": "the hull circles (R_b = 3 m at +-2 m) are fixed: the clearance metrics "
+                      "and the desired separation R_b + d_p use them too",
+}
+"""NmpcConfig fields a scenario may not change, because the loop and its metrics assume them."""
+
+
 def _controller_options(t: _Table, controller: str, d_p_m: float, params: BoatParams) -> dict:
     """[controller.options], checked now so a bad value never reaches a run: the NMPC takes
     NmpcConfig's fields by name plus `method` and `knows_current`; the baselines take none."""
@@ -615,6 +637,8 @@ def _controller_options(t: _Table, controller: str, d_p_m: float, params: BoatPa
             raise t.err(key, "d_p is set by controller.d_p_m")
         elif key == "boat":
             raise t.err(key, "the controller's model is set in [controller.boat]")
+        elif key in FIXED_BY_THE_LOOP:
+            raise t.err(key, FIXED_BY_THE_LOOP[key])
         elif key in settable:
             config[key] = _option_value(t, key, hints[key])
         else:

@@ -68,7 +68,7 @@ def run(args) -> int:
 
 def _written(out: Path, args) -> list[str]:
     """The files this run writes into `out` (plots only when asked for), that exist."""
-    names = ["summary.json", "timing.json", "log.csv", "segments.csv"]
+    names = ["summary.json", "timing.json", "log.csv", "segments.csv", "snapshots.json"]
     if args.plant == "mavlink-sim":
         names.append("mavlink.tlog")
     if not args.no_plots:

@@ -304,7 +304,9 @@ def test_points_must_be_numbers_not_booleans_or_text(tmp_path):
     ("nmpc", "slack_weight = -1.0", ["'controller.options.slack_weight'", "must not be negative"]),
     ("nmpc", "q_diag = [1, 2]", ["'controller.options.q_diag'", "needs 8 weights"]),
     ("nmpc", 'r_diag = [1, "a"]', ["'controller.options.r_diag'", "expected a list of numbers"]),
-    ("nmpc", "hull_offsets_m = [1, 2, 3]", ["'controller.options.hull_offsets_m'", "expected 2 numbers"]),
+    ("nmpc", "hull_offsets_m = [1, -1]", ["'controller.options.hull_offsets_m'", "fixed"]),
+    ("nmpc", "hull_radius_m = 2.0", ["'controller.options.hull_radius_m'", "fixed"]),
+    ("nmpc", "control_period_s = 0.5", ["'controller.options.control_period_s'", "10 Hz"]),
     ("nmpc", "terminal_factor = -2.0", ["'controller.options.terminal_factor'", "non-negative"]),
     ("nmpc", 'method = "newton"', ["'controller.options.method'", "rti, sqp, ipopt"]),
     ("nmpc", "knows_current = 1", ["'controller.options.knows_current'", "expected true or false"]),
@@ -313,6 +315,14 @@ def test_points_must_be_numbers_not_booleans_or_text(tmp_path):
 def test_controller_options_are_checked_on_load(tmp_path, controller, options, words):
     text = STRAIGHT + f'[controller]\ntype = "{controller}"\n[controller.options]\n{options}\n'
     bad(text, tmp_path, *words)
+
+
+@pytest.mark.parametrize("options, limit", [("", "4.69 m/s at 100 %"),
+                                            ("[controller.options]\nnT_max = 50\n", "at 50 %")])
+def test_a_target_speed_above_the_boats_top_speed_is_an_error(tmp_path, options, limit):
+    text = STRAIGHT.replace("[route]\n", "[route]\ntarget_speed_mps = 6.0\n")
+    bad(text + '[controller]\ntype = "nmpc"\n' + options, tmp_path,
+        "field 'route.target_speed_mps': 6 m/s is above the controller's boat's top speed", limit)
 
 
 def test_good_nmpc_options_are_kept(tmp_path):
@@ -366,6 +376,7 @@ def test_sensor_defaults_are_the_sensors_own(tmp_path):
 @pytest.mark.parametrize("change, words", [
     (("rate_hz = 10", "rate_hz = 0"), ["'sensors.gps.rate_hz'", "must be > 0"]),
     (("rate_hz = 10", "rate_hz = 200"), ["'sensors.gps.rate_hz'", "must be <= 100.0"]),
+    (("rate_hz = 10", "rate_hz = 40"), ["'sensors.gps.rate_hz'", "must divide 100 Hz", "got 40"]),
     (("pos_sigma_m = 0.5", "pos_sigma_m = -0.5"), ["'sensors.gps.pos_sigma_m'", "must be >= 0"]),
     (("heading_sigma_deg = 1.0", "heading_sigma_rad = 0.01"),
      ["'sensors.ahrs.heading_sigma_rad'", "unknown field"]),

@@ -1,5 +1,6 @@
 """Scripted scenarios: every scenario file under scenarios/ runs in closed loop and meets its
-pass criteria. Files with `default_test = false` (the full canal) are marked slow. Each file is
+pass criteria (the full Pohang canal too, about 30 s). Files with `default_test = false` are
+marked slow. Each file is
 loaded inside its own test, so a broken file fails that test and no other; `canalnav run`'s
 exit status and file list are checked on a tiny scenario."""
 
