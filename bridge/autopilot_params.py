@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 
-from controller.errors import InputError
+from controller.errors import InputError, finite_number
 
 from . import ardupilot
 
@@ -90,13 +90,7 @@ class ParamTable:
 
 
 def _number(name: str, value) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"autopilot parameter {name}: {value!r} is not a number") from None
-    if not math.isfinite(v):
-        raise InputError(f"autopilot parameter {name}: {value!r} is not finite")
-    return v
+    return finite_number(value, f"autopilot parameter {name}")
 
 
 def param_id(raw) -> str:

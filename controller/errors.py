@@ -21,6 +21,17 @@ class SolverError(CanalnavError, RuntimeError):
     """An optimiser failed in a way its caller must act on (e.g. stop the boat)."""
 
 
+def finite_number(value, what: str) -> float:
+    """`value` as a finite float, or an InputError naming `what` and the value."""
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{what}: expected a number, got {value!r}") from None
+    if x != x or x in (float("inf"), float("-inf")):
+        raise InputError(f"{what}: must be finite, got {value!r}")
+    return x
+
+
 def where(file: object = None, line: int | None = None, column: str | int | None = None) -> str:
     """Format a location prefix like ``runs/a.csv:12: column 'u':`` for error messages."""
     parts = []

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InputError, SolverError
+from .errors import InputError, SolverError, finite_number
 from .geometry import unwrap_near
 from .nmpc import NU, NX, NX_BOAT, NmpcConfig, ParamLayout, build_ocp, pack_params
 from .reference import Reference, WaypointPath, reference_trajectory, waypoint_path
@@ -93,17 +93,6 @@ def _finite_vector(value, size: int, what: str) -> np.ndarray:
     return arr
 
 
-def _number(value, what: str) -> float:
-    """A finite real number, or an InputError naming `what`."""
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"{what}: expected a number, got {value!r}") from None
-    if not np.isfinite(x):
-        raise InputError(f"{what}: must be finite, got {value!r}")
-    return x
-
-
 def top_speed_mps(boat, throttle_pct: float = 100.0) -> float:
     """Steady surge speed at `throttle_pct` in still water (c_eff nT^2 = drag)."""
     a, b, f = -boat.Xuu, -boat.Xu, boat.c_eff * float(throttle_pct)**2
@@ -175,11 +164,11 @@ class NmpcController:
         act = np.clip(act, [-c.nT_max, -c.nS_max], [c.nT_max, c.nS_max])
         current = _finite_vector(current, 2, "current [north, east]")
         self._set_path(waypoints)
-        speed = _number(target_speed_mps, "target_speed_mps")
+        speed = finite_number(target_speed_mps, "target_speed_mps")
         if not 0.0 <= speed <= self._top_speed:
             raise InputError(f"target_speed_mps: must lie in [0, {self._top_speed:.2f}] m/s "
                              f"(the boat's top speed at {c.nT_max:g} % throttle), got {speed:g}")
-        elapsed = c.control_period_s if elapsed_s is None else _number(elapsed_s, "elapsed_s")
+        elapsed = c.control_period_s if elapsed_s is None else finite_number(elapsed_s, "elapsed_s")
         if elapsed < 0:
             raise InputError(f"elapsed_s: must be a non-negative number of s, got {elapsed:g}")
         guess = self._shifted_plan(elapsed)

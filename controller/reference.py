@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, finite_number
 from .geometry import Polyline, unwrap_near
 
 
@@ -106,11 +106,8 @@ def reference_trajectory(path: WaypointPath, position, heading_rad: float, speed
     The closest point is searched on arc lengths [progress_m, progress_m + search_ahead_m]
     (the whole rest of the path if None): forward only, so the reference never runs back.
     """
-    try:
-        speed_mps = float(speed_mps)
-    except (TypeError, ValueError):
-        speed_mps = float("nan")
-    if not np.isfinite(speed_mps) or speed_mps < 0:
+    speed_mps = finite_number(speed_mps, "target speed")
+    if speed_mps < 0:
         raise InputError(f"target speed: must be a non-negative number of m/s, got {speed_mps!r}")
     s_max = None if search_ahead_m is None else progress_m + search_ahead_m
     s0, distance = path.project(position, s_min=progress_m, s_max=s_max)
