@@ -74,14 +74,13 @@ def select_segments(segments, position, n_slots: int = 16, range_m: float = np.i
     slots = np.zeros((n_slots, len(SLOT_FIELDS)))
     if len(arr) == 0:
         return SegmentSelection(slots, 0, np.inf)
-    position = np.asarray(position, float)[:2]
-    from_boat = distance_to_segments(position, arr)
-    in_range = np.flatnonzero(from_boat <= range_m)
-    points = position[None, :]
+    points = np.asarray(position, float)[None, :2]
     if path is not None:
         points = np.vstack([points, np.asarray(path, float).reshape(-1, 2)])
-    to_plan = distance_to_path(points, arr[in_range])
-    order = np.argsort(to_plan + NEAR_FIRST_PER_M * from_boat[in_range], kind="stable")
+    distance = _distances(points, arr)  # row 0: from the boat
+    in_range = np.flatnonzero(distance[0] <= range_m)
+    to_plan = distance[:, in_range].min(axis=0)
+    order = np.argsort(to_plan + NEAR_FIRST_PER_M * distance[0, in_range], kind="stable")
     kept = in_range[order[:n_slots]]
     slots[: len(kept), :4] = arr[kept]
     slots[: len(kept), 4] = 1.0
@@ -96,23 +95,16 @@ def fill_segment_slots(segments, position, n_slots: int = 16, range_m: float = n
     return select_segments(segments, position, n_slots, range_m, path).slots
 
 
-def distance_to_path(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
-    """Distance (M,) from each (x_c, y_c, theta, length) segment to the nearest of `points`
-    (K, 2)."""
-    if len(segments) == 0:
-        return np.zeros(0)
-    dx = points[:, 0:1] - segments[:, 0]  # (K, M)
-    dy = points[:, 1:2] - segments[:, 1]
-    c, s = np.cos(segments[:, 2]), np.sin(segments[:, 2])
-    along = np.abs(dx * c + dy * s)
-    across = -dx * s + dy * c
-    return np.hypot(np.maximum(along - segments[:, 3] / 2, 0.0), across).min(axis=0)
-
-
 def distance_to_segments(point: np.ndarray, segments: np.ndarray) -> np.ndarray:
-    """Distance (M,) from one point to each (x_c, y_c, theta, length) segment: the point's
-    offset along the segment, clamped to its half length, and across it."""
-    dx, dy = point[0] - segments[:, 0], point[1] - segments[:, 1]
+    """Distance (M,) from one point to each (x_c, y_c, theta, length) segment."""
+    return _distances(np.asarray(point, float)[None, :2], segments)[0]
+
+
+def _distances(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
+    """Distance (K, M) from each point (K, 2) to each segment: the point's offset along the
+    segment, clamped to its half length, and across it."""
+    dx = points[:, 0:1] - segments[:, 0]
+    dy = points[:, 1:2] - segments[:, 1]
     c, s = np.cos(segments[:, 2]), np.sin(segments[:, 2])
     along = np.abs(dx * c + dy * s)
     across = -dx * s + dy * c
