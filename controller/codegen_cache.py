@@ -91,7 +91,7 @@ def build_library(name: str, code: str, flags: tuple[str, ...] = DEFAULT_FLAGS,
     """
     directory = directory or cache_dir()
     library = library_path(name, code, flags, link, directory)
-    if library.exists() and not (rebuild and compiler() is not None):
+    if library.exists() and not rebuild:
         return library, True, 0.0
     cc = compiler()
     if cc is None:
@@ -109,21 +109,30 @@ def build_library(name: str, code: str, flags: tuple[str, ...] = DEFAULT_FLAGS,
     return library, False, time.perf_counter() - t0
 
 
+def load_cached(name: str, code: str, load, flags: tuple[str, ...] = DEFAULT_FLAGS,
+                link: tuple[str, ...] = ("-lm",), directory: Path | None = None):
+    """`load(path)` of the cached library of `code`, built first if needed, and rebuilt once
+    if a cached one does not load (a broken file) and a compiler is there:
+    (loaded, path, cache_hit, compile seconds). Raises what `build_library` or `load` raise."""
+    path, hit, seconds = build_library(name, code, flags, link, directory)
+    try:
+        return load(path), path, hit, seconds
+    except (OSError, RuntimeError):
+        if not hit or compiler() is None:
+            raise
+    path, hit, seconds = build_library(name, code, flags, link, directory, rebuild=True)
+    return load(path), path, hit, seconds
+
+
 def compile_cached(function: ca.Function, flags: tuple[str, ...] = DEFAULT_FLAGS,
                    directory: Path | None = None) -> CompiledFunction:
     """`function` as a compiled library from the cache, compiling it first if needed; the
     interpreted `function` itself, with a warning, when that is impossible."""
-    code = generate_c(function)
+    name = function.name()
     try:
-        library, hit, seconds = build_library(function.name(), code, flags, directory=directory)
-        try:
-            loaded = ca.external(function.name(), str(library))
-        except RuntimeError:
-            if not hit or compiler() is None:
-                raise
-            library, hit, seconds = build_library(function.name(), code, flags,
-                                                  directory=directory, rebuild=True)
-            loaded = ca.external(function.name(), str(library))
+        loaded, library, hit, seconds = load_cached(
+            name, generate_c(function), lambda path: ca.external(name, str(path)), flags,
+            directory=directory)
     except (OSError, RuntimeError, subprocess.CalledProcessError) as exc:
         detail = getattr(exc, "stderr", "") or str(exc)
         warnings.warn(f"cannot compile or load {function.name()}, running it interpreted "

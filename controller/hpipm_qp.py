@@ -15,7 +15,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from .codegen_cache import build_library
+from .codegen_cache import load_cached
 
 MODES = {"speed_abs": 0, "speed": 1, "balance": 2, "robust": 3}
 STATUS = {0: "success", 1: "max_iter", 2: "min_step", 3: "nan", 4: "inconsistent_eq"}
@@ -32,16 +32,10 @@ def load_library() -> tuple[ctypes.CDLL, bool, float]:
     """The compiled shim (cache hit or fresh build): (library, cache_hit, compile seconds)."""
     code = resources.files("controller").joinpath("nmpc_hpipm.c").read_text()
     libdir = _casadi_dir()
-    options = dict(flags=("-O2", f"-I{libdir / 'include'}"),
-                   link=(f"-L{libdir}", "-lhpipm", "-lblasfeo", f"-Wl,-rpath,{libdir}", "-lm"))
-    path, hit, seconds = build_library("nmpc_hpipm", code, **options)
-    try:
-        lib = ctypes.CDLL(str(path))
-    except OSError:
-        if not hit:
-            raise
-        path, hit, seconds = build_library("nmpc_hpipm", code, rebuild=True, **options)
-        lib = ctypes.CDLL(str(path))
+    lib, _, hit, seconds = load_cached(
+        "nmpc_hpipm", code, lambda path: ctypes.CDLL(str(path)),
+        flags=("-O2", f"-I{libdir / 'include'}"),
+        link=(f"-L{libdir}", "-lhpipm", "-lblasfeo", f"-Wl,-rpath,{libdir}", "-lm"))
     lib.nmpc_qp_create.restype = ctypes.c_void_p
     lib.nmpc_qp_create.argtypes = [ctypes.c_int] * 5 + [_c_int_p, ctypes.c_int, _c_int_p,
                                                          _c_double_p, _c_double_p, ctypes.c_int,
