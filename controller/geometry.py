@@ -77,6 +77,16 @@ def polyline_segments(polyline) -> tuple[np.ndarray, np.ndarray]:
     return pts[:-1], pts[1:]
 
 
+def polyline_legs(polylines) -> tuple[np.ndarray, np.ndarray]:
+    """All legs of several (K, 2) polylines as two (M, 2) endpoint arrays a, b (polylines of
+    fewer than two points have none)."""
+    parts = [np.asarray(p, float).reshape(-1, 2) for p in polylines]
+    parts = [p for p in parts if len(p) >= 2]
+    if not parts:
+        return np.zeros((0, 2)), np.zeros((0, 2))
+    return np.vstack([p[:-1] for p in parts]), np.vstack([p[1:] for p in parts])
+
+
 def distance_to_polylines(points, polylines) -> np.ndarray:
     """Smallest distance from each point to any of the polylines: shape (N,)."""
     points = np.asarray(points, float).reshape(-1, 2)

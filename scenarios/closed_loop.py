@@ -2,8 +2,8 @@
 
 One control period (0.1 s) is: perceive segments, run the controller on the estimated state,
 then step the plant in IMU periods (0.01 s) with the command held, fusing AHRS every IMU
-period and GPS at its rate (5 Hz by default) (a plant with its own estimate, such as an autopilot's EKF over
-MAVLink, replaces the sensors and the filter). Every control step is appended to the log as it
+period and GPS at its rate (5 Hz by default); a plant with its own estimate, such as an
+autopilot's EKF over MAVLink, replaces the sensors and the filter. Every control step is appended to the log as it
 happens, so an interrupted run loses nothing; the summary and plots come at the end.
 """
 

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controller.geometry import Polyline, Segment, distance_to_polylines, segments_cross
+from controller.geometry import Polyline, distance_to_polylines, polyline_legs, segments_cross
 from controller.slack_reference import walls_abeam
 
 HULL_CIRCLE_OFFSETS_M = (2.0, -2.0)
@@ -44,10 +44,7 @@ class HullContact:
     """
 
     def __init__(self, outlines, length_m: float = HULL_LENGTH_M, breadth_m: float = HULL_BREADTH_M):
-        parts = [np.asarray(o, float).reshape(-1, 2) for o in outlines]
-        parts = [p for p in parts if len(p) >= 2]
-        self._a = np.vstack([p[:-1] for p in parts]) if parts else np.empty((0, 2))
-        self._b = np.vstack([p[1:] for p in parts]) if parts else np.empty((0, 2))
+        self._a, self._b = polyline_legs(outlines)
         self._half = np.array([length_m / 2, breadth_m / 2])
         self.reach_m = float(np.hypot(*self._half)) + max(abs(o) for o in HULL_CIRCLE_OFFSETS_M)
 
@@ -84,15 +81,13 @@ class CanalWidth:
     """
 
     def __init__(self, outlines, reach_m: float = 50.0):
-        rows = [Segment.from_endpoints(a, b).as_array()
-                for o in outlines for a, b in zip(np.asarray(o, float)[:-1], np.asarray(o, float)[1:])
-                if np.hypot(*(b - a)) > 1e-9]
-        self._segments = np.array(rows).reshape(-1, 4)
-        ends = [np.asarray(o, float).reshape(-1, 2) for o in outlines]
-        a = np.vstack([e[:-1] for e in ends if len(e) >= 2]) if ends else np.empty((0, 2))
-        b = np.vstack([e[1:] for e in ends if len(e) >= 2]) if ends else np.empty((0, 2))
-        keep = np.hypot(*(b - a).T) > 1e-9
-        self._lo, self._hi = np.minimum(a, b)[keep], np.maximum(a, b)[keep]
+        a, b = polyline_legs(outlines)
+        d = b - a
+        length = np.hypot(d[:, 0], d[:, 1])
+        keep = length > 1e-9
+        a, b, d, length = a[keep], b[keep], d[keep], length[keep]
+        self._segments = np.column_stack([(a + b) / 2, np.arctan2(d[:, 1], d[:, 0]), length])
+        self._lo, self._hi = np.minimum(a, b), np.maximum(a, b)
         self.reach_m = float(reach_m)
 
     def at(self, pose, offsets=HULL_CIRCLE_OFFSETS_M) -> tuple[float, float, float]:

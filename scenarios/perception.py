@@ -6,7 +6,7 @@ import time
 
 import numpy as np
 
-from controller.geometry import clip_segments_to_circle, simplify_polyline
+from controller.geometry import clip_segments_to_circle, polyline_legs, simplify_polyline
 from scenarios.world import CanalWorld
 
 
@@ -24,8 +24,7 @@ class KnownWalls:
                  tolerance_m: float = 0.05):
         self.range_m = range_m
         lines = [simplify_polyline(p, tolerance_m) for p in world.surfaces(air_draft_m)]
-        self._a = np.vstack([p[:-1] for p in lines])
-        self._b = np.vstack([p[1:] for p in lines])
+        self._a, self._b = polyline_legs(lines)
 
     def segments(self, time_s, true_state, estimated_state) -> np.ndarray:
         return clip_segments_to_circle(self._a, self._b, np.asarray(true_state)[:2], self.range_m)

@@ -18,7 +18,8 @@ import numpy as np
 from controller.errors import InputError
 from controller.geometry import (Polyline, clip_segments_to_circle, offset_polyline,
                                  point_segment_distance, points_in_polygon, polygon_area,
-                                 polyline_self_touch, segments_cross, segments_touch, wrap_angle)
+                                 polyline_legs, polyline_self_touch, segments_cross,
+                                 segments_touch, wrap_angle)
 
 LAND_SIDES = ("left", "right")
 OBSTACLE_KINDS = ("pier", "boat", "bridge", "other")
@@ -349,8 +350,7 @@ class CanalWorld:
 
     def surface_edges(self, air_draft_m: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
         """All legs of `surfaces()` as two (M, 2) endpoint arrays a, b."""
-        lines = self.surfaces(air_draft_m)
-        return (np.vstack([p[:-1] for p in lines]), np.vstack([p[1:] for p in lines]))
+        return polyline_legs(self.surfaces(air_draft_m))
 
     def clearance(self, points, air_draft_m: float = np.inf) -> np.ndarray:
         """Distance from each (x, y) point to the nearest true surface: shape (N,); 0 inside
@@ -431,8 +431,7 @@ class CanalWorld:
         def legs(lines):
             if not lines:
                 return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, int)
-            a = np.vstack([p[:-1] for p in lines])
-            b = np.vstack([p[1:] for p in lines])
+            a, b = polyline_legs(lines)
             owner = np.concatenate([np.full(len(p) - 1, i) for i, p in enumerate(lines)])
             return a, b, owner
 
@@ -449,11 +448,6 @@ class CanalWorld:
                          np.array([o.z_bottom_m for o in self.obstacles]),
                          np.array([o.z_top_m for o in self.obstacles])),
         }
-
-
-def polyline_legs(lines) -> tuple[np.ndarray, np.ndarray]:
-    """All legs of several polylines as two (M, 2) endpoint arrays a, b."""
-    return np.vstack([p[:-1] for p in lines]), np.vstack([p[1:] for p in lines])
 
 
 def walls_crossing(walls) -> tuple[int, int, int, int] | None:
