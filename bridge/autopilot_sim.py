@@ -169,8 +169,8 @@ class AutopilotSim:
 
     # -- construction ---------------------------------------------------------------------
     def _build_plant(self, work_dir):
-        from scenarios.fmu_plant import FmuPlant
-        from scenarios.plant import ActuatorLimits
+        from scenarios.plants.fmu import FmuPlant
+        from scenarios.plants.plant import ActuatorLimits
 
         if work_dir is None:
             self._tmp = tempfile.TemporaryDirectory(prefix="canalnav-autopilot-")

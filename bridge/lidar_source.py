@@ -2,7 +2,7 @@
 
 A `LidarSource` returns one merged cloud in the body frame (x forward, y starboard, z down,
 origin on the waterline) for a time and pose, or None when it has nothing; the segments then
-come from `controller.detection.detect_segments` (see `segments`). A live driver can join
+come from `controller.perception.detect_segments` (see `segments`). A live driver can join
 later behind the same `scan` method.
 """
 
@@ -16,7 +16,7 @@ from typing import Protocol
 import numpy as np
 
 from controller.errors import InputError
-from scenarios.lidar import sensor_rotation
+from scenarios.sensors.lidar import sensor_rotation
 
 SCAN_SUFFIXES = (".npy", ".bin")
 
@@ -28,7 +28,7 @@ class LidarSource(Protocol):
 
 
 class SimLidarSource:
-    """The scenario's canal seen by the simulated LiDAR (scenarios.lidar) at the given pose.
+    """The scenario's canal seen by the simulated LiDAR (scenarios.sensors.lidar) at the given pose.
 
     On the bridge that pose is the autopilot's EKF estimate (the bridge knows no other), so
     the simulated walls sit where the boat believes it is: navigation errors do not shift the
@@ -39,7 +39,7 @@ class SimLidarSource:
     name = "sim"
 
     def __init__(self, scenario, seed: int | None = None):
-        from scenarios.lidar import LidarSimulator
+        from scenarios.sensors.lidar import LidarSimulator
 
         seed = scenario.seed if seed is None else int(seed)
         self.simulator = LidarSimulator(scenario.world, seed=seed * 7919 + 3)
@@ -52,7 +52,7 @@ class SimLidarSource:
 
 def mount_transform(mount) -> tuple[np.ndarray, np.ndarray]:
     """(R, t) from sensor to body frame for a mount (x, y, z m, roll, pitch, yaw rad):
-    p_body = R p_sensor + t, R = Rz(yaw) Ry(pitch) Rx(roll) as `scenarios.lidar.LidarMount`.
+    p_body = R p_sensor + t, R = Rz(yaw) Ry(pitch) Rx(roll) as `scenarios.sensors.lidar.LidarMount`.
     A sensor that reports x forward, y left, z up (ROS) has roll = 180 deg."""
     x, y, z, roll, pitch, yaw = (float(v) for v in mount)
     return sensor_rotation(roll, pitch, yaw), np.array([x, y, z])
@@ -158,8 +158,8 @@ def make_lidar_source(text: str, scenario, seed: int | None = None) -> LidarSour
 
 def segments(points, pose, config=None) -> np.ndarray:
     """Wall segments (M, 4) in the inertial frame from a body-frame cloud and the pose
-    (controller.detection); no cloud -> no segments."""
-    from controller.detection import DEFAULT, detect_segments
+    (controller.perception); no cloud -> no segments."""
+    from controller.perception.detection import DEFAULT, detect_segments
 
     if points is None:
         return np.zeros((0, 4))

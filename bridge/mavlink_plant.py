@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from bridge.clock import VirtualClock
-from scenarios.plant import PlantFailure, PlantOutput
+from scenarios.plants.plant import PlantFailure, PlantOutput
 
 OVERRIDE_PERIOD_S = 0.1  # overrides go out at the control rate (and whenever they change)
 
@@ -126,5 +126,5 @@ class MavlinkSimPlant:
 
 
 def mavlink_sim_plant(scenario, out_dir) -> MavlinkSimPlant:
-    """The `PLANTS` factory of `scenarios.runner`."""
+    """The `PLANTS` factory of `scenarios.loop.runner`."""
     return MavlinkSimPlant(scenario, out_dir)

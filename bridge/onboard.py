@@ -361,7 +361,7 @@ def run_bridge(options: BridgeOptions, console=sys.stderr) -> BridgeResult:
     from bridge.clock import RealClock
     from bridge.lidar_source import make_lidar_source
     from bridge.link import AutopilotLink
-    from scenarios.controllers import NmpcController
+    from scenarios.loop.controllers import NmpcController
     from scenarios.scenario_file import load_scenario
 
     if options.scenario is None or not options.connect:

@@ -204,8 +204,8 @@ class SitlPhysicsServer:
 
     def _default_plant(self, scenario, work_dir):
         """The boat FMU with the scenario's plant parameters and actuator rates."""
-        from scenarios.fmu_plant import FmuPlant
-        from scenarios.plant import ActuatorLimits
+        from scenarios.plants.fmu import FmuPlant
+        from scenarios.plants.plant import ActuatorLimits
 
         if work_dir is None:
             self._tmp = tempfile.TemporaryDirectory(prefix="canalnav-sitl-")
@@ -216,7 +216,7 @@ class SitlPhysicsServer:
     # -- the protocol, without sockets -----------------------------------------------------
     @property
     def output(self):
-        """The plant's last output (scenarios.plant.PlantOutput)."""
+        """The plant's last output (scenarios.plants.plant.PlantOutput)."""
         return self._output
 
     def handle(self, datagram: bytes, addr=None) -> bytes | None:

@@ -21,9 +21,9 @@ from controller.errors import InputError
 from controller.geometry import Polyline
 from controller.params import IDENTIFIED, BoatParams
 
-from .lidar import LidarNoise
-from .sensors import AhrsConfig, GpsConfig
-from .world import OBSTACLE_KINDS, CanalWorld, Obstacle, Wall, WorldError, walls_crossing
+from .sensors.lidar import LidarNoise
+from .sensors.gps_ahrs import AhrsConfig, GpsConfig
+from .world.canal import OBSTACLE_KINDS, CanalWorld, Obstacle, Wall, WorldError, walls_crossing
 
 CONTROLLERS = ("nmpc", "los-pid", "lexicographic")
 PERCEPTIONS = ("lidar", "known-walls")
@@ -419,6 +419,18 @@ def load_scenario(path: str | Path) -> Scenario:
     return parse_scenario(text, str(path), path)
 
 
+DEMO_NAMES = ("demo",)
+
+
+def load_world(scenario: str | Path | None) -> CanalWorld:
+    """The canal of a scenario file, or the built-in demo canal (None or "demo")."""
+    if scenario is None or str(scenario) in DEMO_NAMES:
+        from .world.demo import demo_canal
+
+        return demo_canal()
+    return load_scenario(scenario).world
+
+
 def parse_scenario(text: str, source: str = "<string>", path: Path | None = None) -> Scenario:
     try:
         data = tomllib.loads(text)
@@ -490,7 +502,7 @@ def parse_scenario(text: str, source: str = "<string>", path: Path | None = None
     options = _controller_options(ctrl.table("options") or _Table({}, "controller.options", source),
                                   controller, d_p, ctrl_params)
     ctrl.done()
-    from controller.nmpc_controller import top_speed_mps
+    from controller.nmpc.controller import top_speed_mps
 
     throttle = options.get("nT_max", 100.0)
     if target_speed > top_speed_mps(ctrl_params, throttle):
@@ -622,8 +634,8 @@ def _controller_options(t: _Table, controller: str, d_p_m: float, params: BoatPa
         return {}
     import typing
 
-    from controller.nmpc import NmpcConfig
-    from controller.nmpc_controller import METHODS
+    from controller.nmpc.problem import NmpcConfig
+    from controller.nmpc.controller import METHODS
 
     hints = typing.get_type_hints(NmpcConfig)
     settable = sorted(set(hints) - {"boat", "separation_m"})

@@ -3,7 +3,7 @@
 
 def register(subparsers) -> None:
     """No subcommand of its own: registers `mavlink-sim` in the scenario runner's PLANTS."""
-    from scenarios.runner import PLANTS
+    from scenarios.loop.runner import PLANTS
 
     from bridge.mavlink_plant import mavlink_sim_plant
 

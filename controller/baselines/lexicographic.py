@@ -30,8 +30,8 @@ import numpy as np
 from ..errors import InputError
 from ..geometry import Polyline, unwrap_near
 from ..model import rk4
-from ..obstacle import hull_circle_centres, super_ellipse_margin
-from ..segment_slots import SLOT_FIELDS, fill_segment_slots
+from ..nmpc.obstacle import hull_circle_centres, super_ellipse_margin
+from ..nmpc.segment_slots import SLOT_FIELDS, fill_segment_slots
 
 
 @dataclass(frozen=True)

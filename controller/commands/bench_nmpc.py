@@ -88,10 +88,10 @@ def run(args) -> int:
     import numpy as np
 
     from controller.errors import InputError
-    from controller.nmpc import NmpcConfig
-    from controller.nmpc_bench import bend_canal, closed_loop
-    from controller.nmpc_controller import METHODS, NmpcController
-    from controller.rti import QpOptions
+    from controller.nmpc.problem import NmpcConfig
+    from controller.nmpc.bench import bend_canal, closed_loop
+    from controller.nmpc.controller import METHODS, NmpcController
+    from controller.nmpc.rti import QpOptions
 
     solvers = [s.strip() for s in args.solvers.split(",") if s.strip()]
     unknown = set(solvers) - set(METHODS)

@@ -25,7 +25,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from controller.maneuvers import PAPER_RUNS, QUICK_RUNS, generate, write_logs
+    from controller.identification.maneuvers import PAPER_RUNS, QUICK_RUNS, generate, write_logs
     from controller.params import IDENTIFIED, BoatParams
 
     params = BoatParams.from_toml(args.params) if args.params else IDENTIFIED

@@ -59,7 +59,7 @@ def _config(args):
     import math
 
     from controller.errors import InputError
-    from controller.sysid import BoatDimensions, SysidConfig
+    from controller.identification.sysid import BoatDimensions, SysidConfig
 
     for name in ("mass", "length", "breadth"):
         value = getattr(args, name)
@@ -73,8 +73,8 @@ def run(args) -> int:
     import dataclasses
     import json
 
-    from controller.logs import read_log
-    from controller.sysid import format_table, identify, result_to_dict
+    from controller.identification.logs import read_log
+    from controller.identification.sysid import format_table, identify, result_to_dict
 
     config = _config(args)
     logs = [read_log(path) for path in args.logs]
@@ -102,8 +102,8 @@ def bench_run(args) -> int:
     import json
     import time
 
-    from controller.maneuvers import PAPER_RUNS, QUICK_RUNS, generate
-    from controller.sysid import SysidConfig, identify
+    from controller.identification.maneuvers import PAPER_RUNS, QUICK_RUNS, generate
+    from controller.identification.sysid import SysidConfig, identify
 
     t0 = time.perf_counter()
     logs = generate(seed=args.seed, noise="realistic",

@@ -28,7 +28,7 @@ def register_bench(sub) -> None:
 
 def run(args) -> int:
     from controller.errors import InputError
-    from scenarios.runner import run_scenario
+    from scenarios.loop.runner import run_scenario
     from scenarios.scenario_file import load_scenario
 
     path = Path(args.scenario) if args.scenario else Path(__file__).resolve().parents[1] / "pohang.toml"

@@ -24,8 +24,8 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from controller.errors import InputError
-    from scenarios.compare import compare, text_table
-    from scenarios.runner import CONTROLLERS
+    from scenarios.studies.compare import compare, text_table
+    from scenarios.loop.runner import CONTROLLERS
     from scenarios.scenario_file import load_scenario
 
     scenario = load_scenario(args.scenario)

@@ -7,19 +7,6 @@ over the true walls.
 
 from __future__ import annotations
 
-DEMO_NAMES = ("demo",)
-
-
-def load_world(scenario):
-    """The canal world to use: the built-in demo canal, or the canal of a scenario file."""
-    from ..demo_canal import demo_canal
-
-    if scenario is None or str(scenario) in DEMO_NAMES:
-        return demo_canal()
-    from ..scenario_file import load_scenario
-
-    return load_scenario(scenario).world
-
 
 def register(sub) -> None:
     p = sub.add_parser(
@@ -45,10 +32,11 @@ def register(sub) -> None:
 def run(args) -> int:
     import numpy as np
 
-    from controller.detection import DEFAULT, crop_mask, detect_segments
+    from controller.perception.detection import DEFAULT, crop_mask, detect_segments
 
-    from ..lidar import LidarSimulator
-    from .bench_detection import score_scan
+    from ..results.detection_score import score_scan
+    from ..scenario_file import load_world
+    from ..sensors.lidar import LidarSimulator
 
     world = load_world(args.scenario)
     pose = world.pose_at(args.at, args.offset)

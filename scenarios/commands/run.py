@@ -41,8 +41,8 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from scenarios.closed_loop import terminal_progress
-    from scenarios.runner import check_criteria, run_scenario
+    from scenarios.loop.closed_loop import terminal_progress
+    from scenarios.loop.runner import check_criteria, run_scenario
     from scenarios.scenario_file import load_scenario
 
     scenario = load_scenario(args.scenario)

@@ -25,7 +25,7 @@ from bridge.lossy_relay import TO_AUTOPILOT, TO_BRIDGE, LossyRelay
 from bridge.mavlink_plant import free_udp_port
 from bridge.onboard import EXIT_GOAL, EXIT_STOPPED, BridgeOptions, OnboardLoop
 from bridge.step_log import StepLog
-from scenarios.controllers import NmpcController
+from scenarios.loop.controllers import NmpcController
 from scenarios.scenario_file import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]

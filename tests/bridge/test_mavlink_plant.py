@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from bridge.mavlink_plant import LinkFaults, MavlinkSimPlant
-from scenarios.runner import PLANTS, run_scenario
+from scenarios.loop.runner import PLANTS, run_scenario
 from scenarios.scenario_file import parse_scenario
 
 

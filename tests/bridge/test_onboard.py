@@ -22,7 +22,7 @@ from bridge.main import main
 from bridge.onboard import (EXIT_GOAL, EXIT_INTERRUPTED, EXIT_REFUSED, EXIT_STOPPED,
                             BridgeOptions, OnboardLoop, nearest_segment_m, prepare_link)
 from bridge.step_log import STEP_COLUMNS, StepLog
-from scenarios.closed_loop import Decision
+from scenarios.loop.closed_loop import Decision
 from scenarios.scenario_file import load_scenario
 
 from pymavlink import mavutil
@@ -315,7 +315,7 @@ def test_prepare_link_for_a_plant(make_autopilot, vclock, scenario):
 
 def test_real_nmpc_and_simulated_lidar_for_a_few_steps(make_autopilot, vclock, tmp_path):
     from bridge.lidar_source import SimLidarSource
-    from scenarios.controllers import NmpcController
+    from scenarios.loop.controllers import NmpcController
 
     scenario = load_scenario(STRAIGHT)
     ap = make_autopilot(state=tuple(scenario.initial_state))

@@ -31,7 +31,7 @@ from bridge.sitl_json import (
     servo_calibration,
 )
 from controller.errors import InputError
-from scenarios.plant import ActuatorLimits, ModelPlant
+from scenarios.plants.plant import ActuatorLimits, ModelPlant
 from scenarios.scenario_file import parse_scenario
 
 SCENARIO = """

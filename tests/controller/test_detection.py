@@ -6,7 +6,7 @@ import warnings
 import numpy as np
 import pytest
 
-from controller.detection import DEFAULT, DetectionConfig, crop_mask, detect_segments
+from controller.perception.detection import DEFAULT, DetectionConfig, crop_mask, detect_segments
 from controller.errors import InputError
 from controller.geometry import point_segment_distance, segments_to_endpoints
 
@@ -240,7 +240,7 @@ def test_column_major_cloud_gives_the_same_segments():
 
 def test_near_chords_and_principal_match_simple_references():
     """The one-table chord test and the moment fit against plain per-chord, per-point maths."""
-    from controller.detection import _near_chords, _principal
+    from controller.perception.detection import _near_chords, _principal
 
     rng = np.random.default_rng(7)
     pts = rng.uniform(-5.0, 5.0, (300, 2))

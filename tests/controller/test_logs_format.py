@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from controller.errors import InputError
-from controller.logs import ManeuverLog, format_log, parse_log, read_log, with_truth_meta, write_log
+from controller.identification.logs import ManeuverLog, format_log, parse_log, read_log, with_truth_meta, write_log
 from controller.params import IDENTIFIED
 
 HEADER = "time [s],x [m],y [m],psi [deg],u [m/s],v [m/s],r [deg/s],nT [%],nS [%]"

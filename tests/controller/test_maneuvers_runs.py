@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from controller import maneuvers as m
+from controller.identification import maneuvers as m
 from controller.params import IDENTIFIED
 
 

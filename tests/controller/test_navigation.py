@@ -8,7 +8,7 @@ from controller.errors import InputError
 from controller.geometry import wrap_angle
 from controller.navigation import NavigationFilter
 from controller.params import IDENTIFIED
-from scenarios.sensors import AhrsSensor, GpsSensor
+from scenarios.sensors.gps_ahrs import AhrsSensor, GpsSensor
 
 
 def run_filter(seconds=120.0, seed=3, x0_error=(2.0, -1.5, 0.08, 0.3, 0.0, 0.0)):

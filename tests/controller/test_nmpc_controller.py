@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from controller.errors import InputError, SolverError
-from controller.nmpc import NmpcConfig
-from controller.nmpc_bench import closed_loop, open_water, straight_canal
-from controller.nmpc_controller import NmpcController
-from controller.rti import QpOptions, QpStepResult
+from controller.nmpc.problem import NmpcConfig
+from controller.nmpc.bench import closed_loop, open_water, straight_canal
+from controller.nmpc.controller import NmpcController
+from controller.nmpc.rti import QpOptions, QpStepResult
 
 CFG = NmpcConfig()
 SAFE = CFG.hull_radius_m + CFG.separation_m  # 5 m
@@ -126,7 +126,7 @@ def test_a_boat_at_rest_between_walls_starts_cleanly(current):
 
 _CACHE_PROBE = (
     "import json, warnings; warnings.simplefilter('error', RuntimeWarning); "
-    "from controller.nmpc_controller import NmpcController; "
+    "from controller.nmpc import NmpcController; "
     "c = NmpcController(); i = c.compiled_info; "
     "print(json.dumps({'hit': i.cache_hit, 'lib': str(i.library), 'compile_s': i.compile_s, "
     "'hpipm_hit': c._qp.qp.cache_hit}))")
@@ -154,7 +154,7 @@ def test_a_cold_cache_compiles_once_and_a_second_process_compiles_nothing(tmp_pa
 
 def test_a_cached_library_is_used_without_a_compiler(rti, monkeypatch):
     """A boat computer may carry the cache but no gcc: the libraries load all the same."""
-    from controller import codegen_cache
+    from controller.nmpc import codegen_cache
 
     assert rti.compiled_info.compiled
     monkeypatch.setattr(codegen_cache, "compiler", lambda: None)
@@ -166,7 +166,7 @@ def test_a_cached_library_is_used_without_a_compiler(rti, monkeypatch):
 
 
 def test_no_compiler_falls_back_to_interpreted_functions(monkeypatch, tmp_path):
-    from controller import codegen_cache
+    from controller.nmpc import codegen_cache
 
     monkeypatch.setattr(codegen_cache, "compiler", lambda: None)
     ocp_fn = NmpcController(CFG, method="ipopt").ocp.linearisation
@@ -177,7 +177,7 @@ def test_no_compiler_falls_back_to_interpreted_functions(monkeypatch, tmp_path):
 
 def test_with_no_compiler_and_an_empty_cache_the_controller_runs_interpreted(monkeypatch,
                                                                             tmp_path):
-    from controller import codegen_cache
+    from controller.nmpc import codegen_cache
 
     monkeypatch.setattr(codegen_cache, "compiler", lambda: None)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
@@ -198,7 +198,7 @@ def _tiny_function():
 
 
 def _break_the_cached_library(fn, directory):
-    from controller import codegen_cache
+    from controller.nmpc import codegen_cache
 
     broken = codegen_cache.library_path(fn.name(), codegen_cache.generate_c(fn),
                                         directory=directory)
@@ -208,7 +208,7 @@ def _break_the_cached_library(fn, directory):
 
 
 def test_a_cached_library_that_does_not_load_is_rebuilt(tmp_path):
-    from controller import codegen_cache
+    from controller.nmpc import codegen_cache
 
     fn = _tiny_function()
     broken = _break_the_cached_library(fn, tmp_path)
@@ -218,7 +218,7 @@ def test_a_cached_library_that_does_not_load_is_rebuilt(tmp_path):
 
 
 def test_without_a_compiler_a_library_that_does_not_load_falls_back(tmp_path, monkeypatch):
-    from controller import codegen_cache
+    from controller.nmpc import codegen_cache
 
     fn = _tiny_function()
     _break_the_cached_library(fn, tmp_path)
@@ -319,7 +319,7 @@ def test_a_failed_warm_start_is_retried_from_the_safe_guess(monkeypatch):
 
 
 def test_rti_stays_within_0_2_m_of_converged_sqp_on_the_bend():
-    from controller.nmpc_bench import bend_canal
+    from controller.nmpc.bench import bend_canal
 
     canal = bend_canal()  # as `canalnav bench nmpc`: 600 steps reach the 9 m stretch
     runs = {m: closed_loop(NmpcController(CFG, method=m), canal, X0, ACT0, steps=600)
@@ -330,7 +330,7 @@ def test_rti_stays_within_0_2_m_of_converged_sqp_on_the_bend():
 
 
 def test_without_the_direct_hpipm_interface_casadis_is_used(monkeypatch):
-    from controller import hpipm_qp
+    from controller.nmpc import hpipm_qp
 
     def no_build(*args, **kwargs):
         raise OSError("no C compiler found")

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from controller.errors import InputError
-from controller.nmpc import NmpcConfig, build_ocp, clearance_function, pack_params
-from controller.segment_slots import check_segments, fill_segment_slots, select_segments
+from controller.nmpc.problem import NmpcConfig, build_ocp, clearance_function, pack_params
+from controller.nmpc.segment_slots import check_segments, fill_segment_slots, select_segments
 
 
 @pytest.fixture(scope="module")

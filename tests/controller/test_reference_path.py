@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from controller.errors import InputError
-from controller.reference import reference_trajectory, waypoint_path
+from controller.nmpc.reference import reference_trajectory, waypoint_path
 
 NP, TS = 25, 1.0
 

@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 
 from controller.geometry import Segment
-from controller.nmpc import NmpcConfig
-from controller.nmpc_bench import Canal, bend_canal, closed_loop
-from controller.nmpc_controller import NmpcController
-from controller.reference import waypoint_path
-from controller.slack_reference import forced_slack, forced_slack_at, free_width, \
+from controller.nmpc.problem import NmpcConfig
+from controller.nmpc.bench import Canal, bend_canal, closed_loop
+from controller.nmpc.controller import NmpcController
+from controller.nmpc.reference import waypoint_path
+from controller.nmpc.slack_reference import forced_slack, forced_slack_at, free_width, \
     separation_allowed
 
 MARGIN = 5.0  # R_b + d_p

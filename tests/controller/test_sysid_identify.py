@@ -6,10 +6,10 @@ import math
 import numpy as np
 import pytest
 
-from controller import maneuvers as m
-from controller import sysid
+from controller.identification import maneuvers as m
+from controller.identification import sysid
 from controller.errors import InputError
-from controller.logs import read_log, write_log
+from controller.identification.logs import read_log, write_log
 from controller.params import IDENTIFIED
 
 RATIO_5 = ("Xu", "Xuu", "c")

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from controller.params import IDENTIFIED
-from scenarios.closed_loop import Decision, LoopConfig, run_closed_loop
-from scenarios.controllers import LosPidController
-from scenarios.plant import ModelPlant
+from scenarios.loop.closed_loop import Decision, LoopConfig, run_closed_loop
+from scenarios.loop.controllers import LosPidController
+from scenarios.plants.plant import ModelPlant
 
 WALLS = (np.array([[-10.0, -8.0], [300.0, -8.0]]), np.array([[-10.0, 8.0], [300.0, 8.0]]))
 WAYPOINTS = np.array([[0.0, 0.0], [100.0, 0.0], [200.0, 2.0]])
@@ -91,7 +91,7 @@ def test_touching_a_wall_ends_the_run_as_a_collision(tmp_path):
 
 
 def test_plots_are_written_from_the_run_directory(tmp_path):
-    from scenarios import plots
+    from scenarios.results import plots
 
     d = tmp_path / "p"
     run(d, duration=20.0)
@@ -106,8 +106,8 @@ def test_plots_are_written_from_the_run_directory(tmp_path):
 
 def test_the_gps_settings_reach_the_filter(tmp_path):
     """A 1 Hz fix with 1 m noise leaves the estimate metres off; the RTK default, centimetres."""
-    from scenarios.plots import read_log
-    from scenarios.sensors import GpsConfig
+    from scenarios.results.plots import read_log
+    from scenarios.sensors.gps_ahrs import GpsConfig
 
     def position_error(folder, **sensors):
         run(folder, duration=60.0, **sensors)
@@ -124,7 +124,7 @@ def test_the_gps_settings_reach_the_filter(tmp_path):
 def test_the_canal_width_is_logged_and_summarised(tmp_path):
     """16 m between the walls everywhere: never narrower than 2 x 5 m, so no narrow time, and
     the clearance where wide is the run's minimum."""
-    from scenarios.plots import read_log
+    from scenarios.results.plots import read_log
 
     result = run(tmp_path / "a")
     log = read_log(result.log_path)

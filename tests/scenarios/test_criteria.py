@@ -5,7 +5,7 @@ from dataclasses import replace
 
 import pytest
 
-from scenarios.runner import check_criteria
+from scenarios.loop.runner import check_criteria
 from scenarios.scenario_file import Criteria, parse_scenario
 
 BASE = """

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from controller.params import IDENTIFIED
-from scenarios.fmu_plant import FmuPlant
-from scenarios.plant import ActuatorLimits, ModelPlant
+from scenarios.plants.fmu import FmuPlant
+from scenarios.plants.plant import ActuatorLimits, ModelPlant
 
 
 @pytest.mark.parametrize("fmi_version", [2, 3])

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from bridge.main import main
-from controller.detection import DEFAULT
+from controller.perception.detection import DEFAULT
 from scenarios.commands.bench_detection import run_benchmark
-from scenarios.demo_canal import demo_canal
-from scenarios.lidar import (BACKDROP, FACE, GROUND, HULL, OBSTACLE, SPRAY, WATER, LidarConfig,
+from scenarios.world.demo import demo_canal
+from scenarios.sensors.lidar import (BACKDROP, FACE, GROUND, HULL, OBSTACLE, SPRAY, WATER, LidarConfig,
                              LidarMount, LidarNoise, LidarSimulator, default_mounts)
-from scenarios.world import CanalWorld, Obstacle
+from scenarios.world.canal import CanalWorld, Obstacle
 
 
 def straight(width=14.0, obstacles=(), **kw):
@@ -251,7 +251,7 @@ def test_default_band_is_below_the_demo_quays():
 
 
 def test_ordered_keys_keep_the_order_of_the_floats():
-    from scenarios.lidar import _ordered
+    from scenarios.sensors.lidar import _ordered
     rng = np.random.default_rng(0)
     x = np.concatenate([rng.normal(0, 1, 500), rng.normal(0, 1e-6, 100),
                         [0.0, -0.0, np.inf, -np.inf, 1e-38, -1e-38, 3e38]]).astype(np.float32)

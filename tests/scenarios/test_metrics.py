@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from controller.geometry import Polyline
-from scenarios import metrics
+from scenarios.results import metrics
 
 
 def test_hull_circles_sit_fore_and_aft_along_the_heading():

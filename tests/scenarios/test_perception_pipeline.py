@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from controller.errors import InputError
-from scenarios.perception import LidarPerception
-from scenarios.perception_pipeline import DelayedLidarPerception, PerceptionWorkerError
-from scenarios.world import CanalWorld
+from scenarios.sensors.perception import LidarPerception
+from scenarios.sensors.perception_pipeline import DelayedLidarPerception, PerceptionWorkerError
+from scenarios.world.canal import CanalWorld
 
 
 @pytest.fixture(scope="module")
@@ -77,7 +77,7 @@ def test_a_run_gives_the_same_files_with_the_worker_or_without(tmp_path):
     from dataclasses import replace
     from pathlib import Path
 
-    from scenarios.runner import run_scenario
+    from scenarios.loop.runner import run_scenario
     from scenarios.scenario_file import load_scenario
 
     root = Path(__file__).resolve().parents[2]
@@ -121,7 +121,7 @@ def test_bench_loop_prints_both_modes_and_their_ratio(capsys):
 
 def test_the_scenarios_lidar_noise_reaches_the_simulator(tmp_path):
     """[sensors.lidar] dropout = 0.5 loses about half the returns of the default 0.03."""
-    from scenarios.runner import make_perception
+    from scenarios.loop.runner import make_perception
     from scenarios.scenario_file import parse_scenario
 
     text = """

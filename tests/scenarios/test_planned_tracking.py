@@ -3,7 +3,7 @@
 import numpy as np
 
 from controller.params import IDENTIFIED
-from scenarios.controllers import PlannedLosPid
+from scenarios.loop.controllers import PlannedLosPid
 
 WAYPOINTS = np.array([[0.0, 0.0], [100.0, 0.0], [200.0, 50.0]])
 

@@ -7,9 +7,9 @@ import pytest
 
 from controller.errors import InputError
 from controller.params import IDENTIFIED
-from scenarios.lidar import LidarNoise
+from scenarios.sensors.lidar import LidarNoise
 from scenarios.scenario_file import load_scenario, parse_scenario, round_corners
-from scenarios.sensors import AhrsConfig, GpsConfig
+from scenarios.sensors.gps_ahrs import AhrsConfig, GpsConfig
 
 BASE = """
 [scenario]

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from bridge.main import main
-from scenarios.runner import check_criteria, run_scenario
+from scenarios.loop.runner import check_criteria, run_scenario
 from scenarios.scenario_file import load_scenario
 
 FILES = sorted((Path(__file__).resolve().parents[2] / "scenarios").glob("*.toml"))

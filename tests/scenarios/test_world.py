@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from controller.errors import InputError
-from scenarios.demo_canal import demo_canal
+from scenarios.world.demo import demo_canal
 from controller.geometry import offset_polyline, self_intersection
-from scenarios.world import CanalWorld, Obstacle, Wall
+from scenarios.world.canal import CanalWorld, Obstacle, Wall
 
 
 def straight(width=12.0, length=100.0, **kw):

@@ -22,8 +22,8 @@ from dataclasses import dataclass, replace
 import casadi as ca
 import numpy as np
 
-from .errors import InputError
-from .nmpc import NU, NX, Ocp
+from ..errors import InputError
+from .problem import NU, NX, Ocp
 
 QP_SOLVERS = ("hpipm", "hpipm-casadi", "piqp")
 """hpipm: HPIPM's OCP solver called directly with the stage blocks (`hpipm_qp`);

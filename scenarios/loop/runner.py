@@ -11,8 +11,8 @@ from pathlib import Path
 from typing import Callable
 
 from controller.errors import InputError
-from scenarios.closed_loop import LoopConfig, RunResult, run_closed_loop
-from scenarios.plant import ActuatorLimits, ModelPlant
+from scenarios.loop.closed_loop import LoopConfig, RunResult, run_closed_loop
+from scenarios.plants.plant import ActuatorLimits, ModelPlant
 from scenarios.scenario_file import Scenario
 
 R_B_M = 3.0  # hull circle radius (paper Table "NMPC parameters")
@@ -22,7 +22,7 @@ bridges with a higher deck are passed under and do not count for clearance."""
 
 
 def _fmu_plant(scenario: Scenario, out_dir: Path):
-    from scenarios.fmu_plant import FmuPlant
+    from scenarios.plants.fmu import FmuPlant
 
     return FmuPlant(scenario.plant_params, ActuatorLimits(*scenario.actuator_rates), out_dir)
 
@@ -39,11 +39,11 @@ def make_perception(scenario: Scenario, parallel: bool | None = None):
     """Known walls, or the simulated LiDAR and detection one control period behind the
     controller (in a worker process if `parallel`; None: when there is a second core)."""
     if scenario.perception == "known-walls":
-        from scenarios.perception import KnownWalls
+        from scenarios.sensors.perception import KnownWalls
 
         return KnownWalls(scenario.world, scenario.known_walls_range_m, AIR_DRAFT_M)
-    from scenarios.lidar import LidarConfig
-    from scenarios.perception_pipeline import DelayedLidarPerception
+    from scenarios.sensors.lidar import LidarConfig
+    from scenarios.sensors.perception_pipeline import DelayedLidarPerception
 
     return DelayedLidarPerception(scenario.world, seed=scenario.seed,
                                   config=LidarConfig(noise=scenario.lidar_noise),
@@ -53,20 +53,20 @@ def make_perception(scenario: Scenario, parallel: bool | None = None):
 def make_controller(scenario: Scenario, name: str | None = None):
     name = name or scenario.controller
     if name == "los-pid":
-        from scenarios.controllers import nmpc_planned_los_pid
+        from scenarios.loop.controllers import nmpc_planned_los_pid
 
         return nmpc_planned_los_pid(scenario)
     if name == "lexicographic":
-        from scenarios.controllers import lexicographic_los_pid
+        from scenarios.loop.controllers import lexicographic_los_pid
 
         return lexicographic_los_pid(scenario)
     if name == "los-pid-waypoints":
-        from scenarios.controllers import LosPidController
+        from scenarios.loop.controllers import LosPidController
 
         return LosPidController(scenario.controller_params, scenario.waypoints,
                                 _los_pid_config(scenario))
     if name == "nmpc":
-        from scenarios.controllers import NmpcController
+        from scenarios.loop.controllers import NmpcController
 
         return NmpcController(scenario)
     raise InputError(f"controller {name!r} is not available (choose from: {', '.join(CONTROLLERS)})")
@@ -119,7 +119,7 @@ def run_scenario(scenario: Scenario, out_dir: Path, controller: str | None = Non
         the_plant.close()
         _close(perception)
     if plots:
-        from scenarios import plots as p
+        from scenarios.results import plots as p
 
         title = f"{scenario.name}: {result.summary['controller']}"
         p.plot_trajectory(out_dir, scenario.world.surfaces(AIR_DRAFT_M), scenario.waypoints,

@@ -7,7 +7,7 @@ controller and the plant of step k, so a worker process on another core renders 
 meanwhile. Serial and parallel runs make the same scans, in the same order, from the same
 seed, so they give the same segments bit for bit; only the wall time differs.
 
-The worker is `python -m scenarios.perception_pipeline`, spoken to over its stdin and stdout
+The worker is `python -m scenarios.sensors.perception_pipeline`, spoken to over its stdin and stdout
 with pickled messages: no fork of a process that holds CasADi, fmpy and OpenCV state, and no
 re-import of the caller's `__main__`.
 """
@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scenarios.perception import LidarPerception
+from scenarios.sensors.perception import LidarPerception
 
 
 class PerceptionWorkerError(RuntimeError):
@@ -98,7 +98,7 @@ class _Worker:
         env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
         try:
             self._proc = subprocess.Popen(
-                [sys.executable, "-m", "scenarios.perception_pipeline"],
+                [sys.executable, "-m", "scenarios.sensors.perception_pipeline"],
                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
         except OSError as exc:
             raise PerceptionWorkerError(f"perception worker: could not start "

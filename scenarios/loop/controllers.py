@@ -7,7 +7,7 @@ import numpy as np
 from controller.baselines.los_pid import LosPidConfig, LosPidTracker
 from controller.geometry import Polyline
 from controller.params import BoatParams
-from scenarios.closed_loop import Decision
+from scenarios.loop.closed_loop import Decision
 
 
 class LosPidController:
@@ -29,7 +29,7 @@ class LosPidController:
 
 
 class NmpcController:
-    """The paper's NMPC (controller.nmpc_controller) on the scenario's waypoints and d_p.
+    """The paper's NMPC (controller.nmpc.NmpcController) on the scenario's waypoints and d_p.
 
     `[controller.options]` of the scenario sets `NmpcConfig` fields by name, plus `method`
     (rti | sqp | ipopt) and `knows_current` (default false: the boat does not know the water
@@ -42,8 +42,8 @@ class NmpcController:
         from dataclasses import fields
 
         from controller.errors import InputError
-        from controller.nmpc import NmpcConfig
-        from controller.nmpc_controller import NmpcController as Core
+        from controller.nmpc.problem import NmpcConfig
+        from controller.nmpc.controller import NmpcController as Core
 
         options = dict(scenario.controller_options)
         method = options.pop("method", "rti")
@@ -128,8 +128,8 @@ class PlannedLosPid:
 def nmpc_planned_los_pid(scenario) -> PlannedLosPid:
     """Baseline 1: the NMPC as a 1 Hz planner, LOS-PID tracking its predicted path."""
     from controller.errors import SolverError
-    from controller.nmpc import NmpcConfig
-    from controller.nmpc_controller import NmpcController as Core
+    from controller.nmpc.problem import NmpcConfig
+    from controller.nmpc.controller import NmpcController as Core
 
     core = Core(NmpcConfig(separation_m=scenario.d_p_m, boat=scenario.controller_params,
                            control_period_s=1.0), method="sqp")

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from controller.geometry import Polyline, distance_to_polylines, polyline_legs, segments_cross
-from controller.slack_reference import walls_abeam
+from controller.nmpc.slack_reference import walls_abeam
 
 HULL_CIRCLE_OFFSETS_M = (2.0, -2.0)
 """Centres of the two hull circles along body x (bow p_b, stern p_s), as in the paper."""
@@ -76,7 +76,7 @@ class CanalWidth:
     best a boat can do is the middle.
 
     Width is the distance to the nearest outline abeam to port plus to starboard (the nearest
-    point within 60 deg of the boat's beam, as `controller.slack_reference` measures it);
+    point within 60 deg of the boat's beam, as `controller.nmpc.slack_reference` measures it);
     outlines farther than `reach_m` are not seen (width inf: open water).
     """
 

@@ -17,9 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InputError, SolverError, finite_number
-from .geometry import unwrap_near
-from .nmpc import NU, NX, NX_BOAT, NmpcConfig, ParamLayout, build_ocp, pack_params
+from ..errors import InputError, SolverError, finite_number
+from ..geometry import unwrap_near
+from .problem import NU, NX, NX_BOAT, NmpcConfig, ParamLayout, build_ocp, pack_params
 from .reference import Reference, WaypointPath, reference_trajectory, waypoint_path
 from .rti import QpOptions, QpStep, SqpResult, sqp
 from .segment_slots import SLOT_FIELDS, select_segments

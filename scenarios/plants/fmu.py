@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from controller.params import BoatParams
-from scenarios.plant import ActuatorLimits, PlantOutput
+from scenarios.plants.plant import ActuatorLimits, PlantOutput
 
 
 class FmuPlant:

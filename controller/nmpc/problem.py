@@ -45,10 +45,10 @@ from dataclasses import dataclass, field, fields
 import casadi as ca
 import numpy as np
 
-from .errors import InputError
-from .model import SMOOTH, Variant, augmented_ode, rk4
+from ..errors import InputError
+from ..model import SMOOTH, Variant, augmented_ode, rk4
 from .obstacle import hull_circle_centres, super_ellipse_margin
-from .params import IDENTIFIED, PARAM_NAMES, BoatParams
+from ..params import IDENTIFIED, PARAM_NAMES, BoatParams
 from .segment_slots import SLOT_FIELDS
 
 NX_BOAT = 8  # [x, y, psi, u, v, r, nT, nS]

@@ -38,9 +38,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import InputError, SolverError, where
+from ..errors import InputError, SolverError, where
 from .logs import STATE_COLUMNS, ManeuverLog
-from .params import PARAM_INFO, PARAM_NAMES, BoatParams
+from ..params import PARAM_INFO, PARAM_NAMES, BoatParams
 
 SURGE_PARAMS = ("m11", "Xu", "Xuu", "c")
 SWAY_YAW_PARAMS = ("m22", "m33", "Yv", "Yr", "Nv", "Nr", "Yvv", "Yrr", "Nvv", "Nrr")
@@ -230,7 +230,7 @@ def discrete_step(variant, n_sub: int):
     """f_d(x, u, p, h): RK4 of `boat_ode` over a step of length h (no current)."""
     import casadi as ca
 
-    from . import model
+    from .. import model
 
     x = ca.SX.sym("x", model.NX)
     u = ca.SX.sym("u", model.NU)
@@ -546,7 +546,7 @@ def _determinability(free: Sequence[str], est: BoatParams, cov: np.ndarray,
 # -- held-out check -----------------------------------------------------------------------------
 def simulate_log(params: BoatParams, log: ManeuverLog, n_sub: int = 4) -> np.ndarray:
     """The exact model driven by the log's commands from its first measured state: (N, 6)."""
-    from .model import EXACT
+    from ..model import EXACT
 
     data = _Data.of(log)
     step = discrete_step(EXACT, n_sub)
@@ -598,7 +598,7 @@ def _common_truth(logs: Sequence[ManeuverLog]) -> BoatParams | None:
 
 def identify(logs: Sequence[ManeuverLog], config: SysidConfig = SysidConfig()) -> SysidResult:
     """Surge then sway-yaw identification from the fit logs; held-out logs only checked."""
-    from .model import Variant
+    from ..model import Variant
 
     surge_logs, sway_logs, heldout_logs = split_logs(logs)
     notes: list[str] = []

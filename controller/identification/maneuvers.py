@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from .logs import ManeuverLog, with_truth_meta, write_log
-from .params import IDENTIFIED, BoatParams
+from ..params import IDENTIFIED, BoatParams
 
 SAMPLE_S = 0.1  # 10 Hz, as the paper's logs
 PLANT_SUBSTEPS = 4  # RK4 sub-steps per sample in the simulated plant
@@ -123,7 +123,7 @@ class _Plant:
     act: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
     def __post_init__(self) -> None:
-        from .model import EXACT, step_function
+        from ..model import EXACT, step_function
 
         self._step = step_function(SAMPLE_S, PLANT_SUBSTEPS, EXACT)
         self._p = self.params.as_vector()
@@ -241,7 +241,7 @@ def generate(params: BoatParams = IDENTIFIED, seed: int = 1, noise: str = "reali
              runs: tuple[Run, ...] = PAPER_RUNS) -> dict[str, ManeuverLog]:
     """Every run of `runs` as a log, keyed by run name. Same seed, same logs."""
     if noise not in NOISE:
-        from .errors import InputError
+        from ..errors import InputError
 
         raise InputError(f"noise {noise!r}: expected one of {', '.join(NOISE)}")
     return {run.name: simulate_run(run, params, NOISE[noise], seed, k, noise)

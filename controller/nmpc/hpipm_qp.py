@@ -1,4 +1,4 @@
-"""HPIPM's OCP QP solver called directly (`nmpc_hpipm.c`), with the stage blocks as numpy
+"""HPIPM's OCP QP solver called directly (`hpipm_shim.c`), with the stage blocks as numpy
 arrays: no sparse-matrix conversion, one C call per QP.
 
 The shim is compiled once against the HPIPM and BLASFEO inside the casadi package and cached
@@ -30,7 +30,7 @@ def _casadi_dir() -> Path:
 
 def load_library() -> tuple[ctypes.CDLL, bool, float]:
     """The compiled shim (cache hit or fresh build): (library, cache_hit, compile seconds)."""
-    code = resources.files("controller").joinpath("nmpc_hpipm.c").read_text()
+    code = resources.files("controller.nmpc").joinpath("hpipm_shim.c").read_text()
     libdir = _casadi_dir()
     lib, _, hit, seconds = load_cached(
         "nmpc_hpipm", code, lambda path: ctypes.CDLL(str(path)),

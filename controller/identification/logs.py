@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError, where
-from .params import PARAM_NAMES, BoatParams
+from ..errors import InputError, where
+from ..params import PARAM_NAMES, BoatParams
 
 FORMAT_LINE = "canalnav maneuver log, format 1"
 

@@ -8,7 +8,7 @@ import time
 import casadi as ca
 import numpy as np
 
-from .nmpc import Ocp
+from .problem import Ocp
 from .rti import SqpResult
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from scenarios.runner import R_B_M, run_scenario
+from scenarios.loop.runner import R_B_M, run_scenario
 from scenarios.scenario_file import Scenario
 
 COMPARED = ("nmpc", "los-pid", "lexicographic")
@@ -35,7 +35,7 @@ def compare(scenario: Scenario, out_dir: Path, controllers=COMPARED, seed: int |
         s, t = result.summary, result.timing
         rows.append({**s, "solve_mean_ms": t["solve_ms"]["mean"], "solve_max_ms": t["solve_ms"]["max"]})
         runs[s["controller"]] = run_dir
-    from scenarios.plots import plot_separation
+    from scenarios.results.plots import plot_separation
 
     plot_separation(runs, R_B_M + scenario.d_p_m, out_dir / "separation.png",
                     f"{scenario.name}: separation, seed {rows[0]['seed']}")

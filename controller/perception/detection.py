@@ -20,8 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InputError
-from .geometry import point_segment_distance
+from ..errors import InputError
+from ..geometry import point_segment_distance
 
 
 @dataclass(frozen=True)

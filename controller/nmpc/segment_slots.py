@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InputError
+from ..errors import InputError
 
 SLOT_FIELDS = ("x_c", "y_c", "theta", "length", "active")
 

@@ -7,7 +7,7 @@ import time
 import numpy as np
 
 from controller.geometry import clip_segments_to_circle, polyline_legs, simplify_polyline
-from scenarios.world import CanalWorld
+from scenarios.world.canal import CanalWorld
 
 
 class KnownWalls:
@@ -37,8 +37,8 @@ class LidarPerception:
     name = "lidar"
 
     def __init__(self, world: CanalWorld, seed: int = 0, config=None, detection=None):
-        from controller.detection import DEFAULT
-        from scenarios.lidar import LidarSimulator
+        from controller.perception.detection import DEFAULT
+        from scenarios.sensors.lidar import LidarSimulator
 
         self.simulator = LidarSimulator(world, config, seed=seed * 7919 + 3)
         self.detection = detection or DEFAULT
@@ -46,7 +46,7 @@ class LidarPerception:
         self.time_s = {"lidar_scan": 0.0, "detection": 0.0}  # wall time, summed over scans
 
     def segments(self, time_s, true_state, estimated_state) -> np.ndarray:
-        from controller.detection import detect_segments
+        from controller.perception.detection import detect_segments
 
         true_state = np.asarray(true_state, float)
         t0 = time.perf_counter()

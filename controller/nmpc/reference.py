@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InputError, finite_number
-from .geometry import Polyline, unwrap_near
+from ..errors import InputError, finite_number
+from ..geometry import Polyline, unwrap_near
 
 
 @dataclass(frozen=True)

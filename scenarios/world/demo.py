@@ -10,7 +10,7 @@ import numpy as np
 
 from controller.geometry import offset_polyline
 
-from .world import CanalWorld, Obstacle, Wall
+from .canal import CanalWorld, Obstacle, Wall
 
 # (kind, value, radius_m): "straight" value = length in m, "turn" value = angle in degrees,
 # positive to starboard (clockwise, as headings).

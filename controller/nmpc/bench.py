@@ -9,10 +9,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import SolverError
-from .geometry import Segment, distance_to_polylines
-from .model import SMOOTH, plant_step_function
-from .nmpc_controller import NmpcController, NmpcStep
+from ..errors import SolverError
+from ..geometry import Segment, distance_to_polylines
+from ..model import SMOOTH, plant_step_function
+from .controller import NmpcController, NmpcStep
 from .segment_slots import distance_to_segments
 
 

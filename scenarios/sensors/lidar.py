@@ -31,7 +31,7 @@ import numpy as np
 
 from controller.errors import InputError
 
-from .world import CanalWorld
+from ..world.canal import CanalWorld
 
 # What each returned point hit (see LidarScan.labels).
 WATER, FACE, GROUND, BACKDROP, OBSTACLE, HULL, SPRAY = range(7)

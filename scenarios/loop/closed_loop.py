@@ -21,10 +21,10 @@ import numpy as np
 
 from controller.geometry import Polyline
 from controller.navigation import NavigationFilter
-from scenarios import metrics
-from scenarios.plant import Plant, PlantFailure, PlantOutput
-from scenarios.run_log import RunLog
-from scenarios.sensors import AhrsConfig, AhrsSensor, GpsConfig, GpsSensor
+from scenarios.results import metrics
+from scenarios.plants.plant import Plant, PlantFailure, PlantOutput
+from scenarios.loop.run_log import RunLog
+from scenarios.sensors.gps_ahrs import AhrsConfig, AhrsSensor, GpsConfig, GpsSensor
 
 
 @dataclass

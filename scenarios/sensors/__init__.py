@@ -1,0 +1,1 @@
+"""Simulated sensors (LiDAR, GPS, AHRS) and the perception they feed the loop."""

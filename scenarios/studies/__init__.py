@@ -1,0 +1,1 @@
+"""Several runs side by side: the paper's comparison."""
