@@ -319,9 +319,11 @@ def _load_obstacles(doc: _Table) -> tuple:
         z_top = o.number("z_top_m", 1.0)
         if z_top <= z_bottom:
             raise o.err("z_top_m", f"must be above z_bottom_m ({z_bottom:g}), got {z_top:g}")
+        remove_at = o.number("remove_at_s", None, low=0)
         try:
             out.append(Obstacle(outline, z_top_m=z_top, z_bottom_m=z_bottom,
-                                kind=o.string("kind", "pier", choices=OBSTACLE_KINDS), name=name))
+                                kind=o.string("kind", "pier", choices=OBSTACLE_KINDS), name=name,
+                                remove_at_s=remove_at))
         except WorldError as exc:
             raise o.err(exc.key, f"obstacle {name!r}: {exc.detail}") from None
         o.done()

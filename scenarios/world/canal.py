@@ -114,7 +114,8 @@ class Obstacle:
     """A prism in the water: a polygon outline between two heights above the waterline.
 
     Piers and moored boats stand on the water (z_bottom_m = 0); a bridge deck spans the canal
-    above it (z_bottom_m = its clearance), so a boat lower than that passes under it.
+    above it (z_bottom_m = its clearance), so a boat lower than that passes under it. One
+    given `remove_at_s` is gone from that time of the run on (a barge that is moved away).
     """
 
     outline: np.ndarray  # (K, 2) polygon, not repeated at the end
@@ -122,6 +123,7 @@ class Obstacle:
     z_bottom_m: float = 0.0
     kind: str = "pier"
     name: str = "obstacle"
+    remove_at_s: float | None = None  # simulation time it leaves the water; None: never
 
     def __post_init__(self) -> None:
         what = f"obstacle {self.name!r}"
@@ -138,11 +140,17 @@ class Obstacle:
         if self.kind not in OBSTACLE_KINDS:
             raise InputError(f"{what}: kind must be one of {', '.join(OBSTACLE_KINDS)}, "
                              f"got {self.kind!r}")
+        if self.remove_at_s is not None:
+            _check_number(self.remove_at_s, f"{what}: remove_at_s", 0.0)
         crossing = polyline_self_touch(self.closed, ON_WALL_M, closed=True)
         if crossing is not None:
             raise WorldError(what, "outline", f"crosses itself (legs {crossing[0]} and {crossing[1]})")
         if abs(polygon_area(self.outline)) < 1e-6:
             raise WorldError(what, "outline", "encloses no area (its points lie on one line)")
+
+    def present_at(self, time_s: float) -> bool:
+        """Whether the obstacle is in the water at simulation time `time_s`."""
+        return self.remove_at_s is None or time_s < self.remove_at_s
 
     @property
     def closed(self) -> np.ndarray:
@@ -334,6 +342,15 @@ class CanalWorld:
         if (s <= 0.0 and along < -ON_WALL_M) or (s >= line.length and along > ON_WALL_M):
             return False
         return dist <= ON_WALL_M or not segments_touch(foot, p, a, b).any()
+
+    @property
+    def changes(self) -> bool:
+        """Whether anything in the world changes during a run (an obstacle is removed)."""
+        return any(o.remove_at_s is not None for o in self.obstacles)
+
+    def obstacles_present(self, time_s: float) -> np.ndarray:
+        """(O,) mask: which obstacles are in the water at simulation time `time_s`."""
+        return np.array([o.present_at(time_s) for o in self.obstacles], bool)
 
     def wall_polylines(self) -> list[np.ndarray]:
         """The true wall faces, (K, 2) each: the ground truth for clearance metrics."""

@@ -405,3 +405,12 @@ def test_a_centre_line_turning_straight_back_is_named(tmp_path):
     text = with_waypoints(STRAIGHT, "[[0, 0], [60, 0]]").replace(
         "centre_line = [[0, 0], [100, 0]]", "centre_line = [[0, 0], [100, 0], [50, 0]]\ncorner_radius_m = 10")
     bad(text, tmp_path, "field 'canal.centre_line': turns straight back on itself")
+
+
+def test_an_obstacle_can_be_removed_at_a_time(tmp_path):
+    s, _ = load(BASE.replace("z_top_m = 1.2", "z_top_m = 1.2\nremove_at_s = 40"), tmp_path)
+    assert s.world.obstacles[0].remove_at_s == 40.0
+    bad(BASE.replace("z_top_m = 1.2", "z_top_m = 1.2\nremove_at_s = -3"), tmp_path,
+        "field 'obstacle[0].remove_at_s': must be >= 0")
+    bad(BASE.replace("z_top_m = 1.2", 'z_top_m = 1.2\nremove_at_s = "soon"'), tmp_path,
+        "field 'obstacle[0].remove_at_s': expected a number")

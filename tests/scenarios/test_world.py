@@ -297,3 +297,14 @@ def test_walls_that_meet_at_one_end_leave_the_other_end_open(reverse):
     assert world.water_ring is not None
     assert world.off_water([[5, 0], [110, 0], [111, 0], [-11, 0]]) == [
         None, None, "outside the canal", "outside the canal"]
+
+
+def test_an_obstacle_removed_at_a_time_is_present_before_it_only():
+    ob = Obstacle([[0, 0], [1, 0], [1, 1]], remove_at_s=30.0, name="barge")
+    assert ob.present_at(29.9) and not ob.present_at(30.0)
+    world = CanalWorld.from_centre_line([[0, 0], [100, 0]], 10.0, obstacles=(ob,))
+    assert world.changes
+    assert world.obstacles_present(0.0).tolist() == [True]
+    assert world.obstacles_present(31.0).tolist() == [False]
+    with pytest.raises(InputError, match="remove_at_s"):
+        Obstacle([[0, 0], [1, 0], [1, 1]], remove_at_s=-1.0)
