@@ -1,5 +1,14 @@
-"""What the LiDAR sees: wall segments detected in a merged point cloud (paper §III-A)."""
+"""What the LiDAR sees: wall segments detected in a merged point cloud (paper §III-A),
+cleaned of what no wall could give, and handed to the controller each period.
 
+`detection` turns a cloud into segments; `cleaning` drops degenerate, non-finite, duplicate,
+absurdly long and out-of-range rows and counts them; `feed` bridges missing scans for a
+short while and then says the boat is blind.
+"""
+
+from .cleaning import CleaningConfig, clean_segments
 from .detection import DetectionConfig, detect_segments
+from .feed import FeedConfig, PerceptionView, SegmentFeed
 
-__all__ = ["DetectionConfig", "detect_segments"]
+__all__ = ["CleaningConfig", "DetectionConfig", "FeedConfig", "PerceptionView", "SegmentFeed",
+           "clean_segments", "detect_segments"]

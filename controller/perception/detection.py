@@ -196,7 +196,10 @@ def _fit_segments(xy: np.ndarray, cfg: DetectionConfig) -> np.ndarray:
         return np.zeros((0, 4))
     ends = np.array(chords, float).reshape(-1, 2, 2)
     a, b = _join_corners(ends[:, 0], ends[:, 1], cfg)
-    return _as_centre_form(a, b)
+    segments = _as_centre_form(a, b)
+    # A short chord whose two ends were both moved to one corner would be a point:
+    # segments shorter than the minimum are dropped here as the pieces were.
+    return segments[segments[:, 3] >= cfg.min_length_m]
 
 
 def _join_corners(a: np.ndarray, b: np.ndarray, cfg: DetectionConfig):
