@@ -22,7 +22,8 @@ from ..geometry import unwrap_near
 from .problem import NU, NX, NX_BOAT, NmpcConfig, ParamLayout, build_ocp, pack_params
 from .reference import Reference, WaypointPath, reference_trajectory, waypoint_path
 from .rti import QpOptions, QpStep, SqpResult, sqp
-from .segment_slots import SLOT_FIELDS, select_segments
+from .passage import WayAhead
+from .segment_slots import SLOT_FIELDS, check_segments, select_segments
 from .slack_reference import forced_slack
 
 METHODS = ("rti", "sqp", "ipopt")
@@ -47,6 +48,8 @@ class SolverStats:
     segments_dropped: int = 0  # segments within range that found no slot
     dropped_nearest_m: float = float("inf")  # the closest of those to the planned path
     command_clipped: bool = False  # the plan's first move had to be cut to the bounds (> 1e-6)
+    waiting: str = ""  # why the reference stops the boat ("way blocked at 23 m"), "" going on
+    blocked_at_m: float | None = None  # arc length along the path of the obstruction
 
     @property
     def time_glue_s(self) -> float:
@@ -122,6 +125,8 @@ class NmpcController:
         self._x0_at = self.ocp.states_at[0]
         self._xy_at = self.ocp.states_at[:, :2]
         self._top_speed = top_speed_mps(config.boat, config.nT_max)
+        self._way = WayAhead(config.min_passage_m, config.stop_short_m, config.stop_decel_mps2,
+                             config.resume_after_s)
         self.compiled_info = None
         if method == "ipopt":
             from .ipopt import IpoptSolver
@@ -145,17 +150,22 @@ class NmpcController:
         self._path: WaypointPath | None = None
         self._waypoints_given: np.ndarray | None = None
         self.consecutive_failures = 0
+        self._way.reset()
 
     # -- the step ---------------------------------------------------------------------------
     def step(self, state, actuators, segments, waypoints, target_speed_mps: float,
-             current=(0.0, 0.0), elapsed_s: float | None = None) -> NmpcStep:
+             current=(0.0, 0.0), elapsed_s: float | None = None,
+             blind: bool = False) -> NmpcStep:
         """One control period.
 
         state: [x, y, psi, u, v, r] (NED m, rad, body m/s, rad/s); actuators: the current
         [nT, nS] in %; segments: (M, 4) rows (x_c, y_c, theta, length); waypoints: (K, 2)
         (the same list keeps the progress along it, a new one restarts it); current: water
         current [north, east] in m/s; elapsed_s: time since the previous call, by which the
-        warm start is shifted (default: the control period; e.g. 1.0 for a 1 Hz planner).
+        warm start is shifted (default: the control period; e.g. 1.0 for a 1 Hz planner);
+        blind: perception has had no usable scan for too long (`perception.feed`).
+        Where the segments leave no passage along the route, or when blind, the reference
+        slows the boat to a stop short of it and holds (`passage`); `stats.waiting` says why.
         """
         t0 = time.perf_counter(), time.thread_time()
         c = self.config
@@ -174,8 +184,10 @@ class NmpcController:
         guess = self._shifted_plan(elapsed)
         if guess is not None:
             x[2] = float(unwrap_near(x[2], guess[self.ocp.state_index(0)][2]))
+        stop = self._stop(x, segments, speed, elapsed, bool(blind))
         reference = reference_trajectory(self._path, x[:2], x[2], speed, c.horizon,
-                                         c.step_s, self._progress_m, self.search_ahead_m)
+                                         c.step_s, self._progress_m, self.search_ahead_m,
+                                         None if stop is None else stop.at_m, c.stop_decel_mps2)
         planned = reference.states[:, :2] if guess is None else guess[self._xy_at]
         selection = select_segments(segments, x[:2], c.segment_slots, c.segment_range_m,
                                     planned)
@@ -219,9 +231,19 @@ class NmpcController:
                 fallback, plan = "shifted_plan", self._start_at(guess, x_init)
         self._plan = plan
         self._progress_m = reference.progress_m
-        return self._output(plan, act, reference, result, fallback, t0, selection)
+        return self._output(plan, act, reference, result, fallback, t0, selection, stop)
 
     # -- pieces -----------------------------------------------------------------------------
+    def _stop(self, x: np.ndarray, segments, speed_mps: float, elapsed_s: float, blind: bool):
+        """The stop the reference must make this period (`passage.WayAhead`), or None."""
+        c = self.config
+        s_max = self._progress_m + self.search_ahead_m
+        s, d = self._path.frame(x[None, :2], self._progress_m, s_max)
+        lookahead = c.segment_range_m + c.stop_short_m
+        segs = check_segments(segments)
+        return self._way.update(self._path, float(s[0]), float(d[0]), float(x[3]), segs, blind,
+                                elapsed_s, lookahead)
+
     def _set_path(self, waypoints) -> None:
         """A new waypoint list restarts the progress along the path; the same one keeps it."""
         try:
@@ -337,7 +359,7 @@ class NmpcController:
         return self.ocp.pack(states, inputs)
 
     def _output(self, plan, act, reference, result: SqpResult, fallback: str,
-                t0: tuple[float, float], selection) -> NmpcStep:
+                t0: tuple[float, float], selection, stop=None) -> NmpcStep:
         c = self.config
         states, inputs = self.ocp.unpack(plan)
         rate_max = np.array([c.dnT_max, c.dnS_max])
@@ -354,6 +376,7 @@ class NmpcController:
             time_total_s=time.perf_counter() - t0[0], cpu_time_s=time.thread_time() - t0[1],
             time_linearisation_s=result.time_linearisation_s, time_qp_s=result.time_qp_s,
             segments_dropped=selection.dropped, dropped_nearest_m=selection.dropped_nearest_m,
-            command_clipped=clipped)
+            command_clipped=clipped, waiting="" if stop is None else stop.reason,
+            blocked_at_m=None if stop is None else stop.blocked_at_m)
         return NmpcStep(command, rates, states[:, :NX_BOAT].copy(), inputs[:, :2].copy(),
                         states[1:, NX - 1].copy(), reference, stats)

@@ -83,6 +83,11 @@ class NmpcConfig:
     segment_range_m: float = 50.0  # segments farther than this are left out
     smooth_eps: float = SMOOTH.eps  # of the smooth |z| in the prediction model
     hessian_regularisation: float = 1e-6  # on zero diagonal weights (v, nT, nS, sigma)
+    # A blocked way or blind perception (`passage`): the reference stops the boat.
+    min_passage_m: float = 6.0  # narrowest way for the hull: the two hull circles, 2 R_b
+    stop_margin_m: float = 1.0  # stop this far beyond R_b + d_p from the obstruction
+    stop_decel_mps2: float = 0.06  # the reference's braking: gentle, as the throttle reverses at 10 %/s
+    resume_after_s: float = 1.0  # the way must stay clear this long before going on
     boat: BoatParams = field(default=IDENTIFIED)
 
     def __post_init__(self) -> None:
@@ -118,8 +123,12 @@ class NmpcConfig:
         for name in ("slack_weight", "separation_m", "hessian_regularisation"):
             if getattr(self, name) < 0:
                 bad(name, "must not be negative")
+        for name in ("stop_margin_m", "resume_after_s"):
+            if getattr(self, name) < 0:
+                bad(name, "must not be negative")
         for name in ("step_s", "control_period_s", "nT_max", "nS_max", "dnT_max", "dnS_max",
-                     "hull_radius_m", "min_half_axis_m", "segment_range_m", "smooth_eps"):
+                     "hull_radius_m", "min_half_axis_m", "segment_range_m", "smooth_eps",
+                     "min_passage_m", "stop_decel_mps2"):
             if getattr(self, name) <= 0:
                 bad(name, "must be positive")
         for name in ("horizon", "rk4_substeps", "segment_slots"):
@@ -135,6 +144,13 @@ class NmpcConfig:
             bad("boat", "expected a BoatParams")
 
     # -- derived --------------------------------------------------------------------------
+    @property
+    def stop_short_m(self) -> float:
+        """From an obstruction to where the boat's origin stops: the bow circle's offset,
+        then R_b + d_p, then the margin."""
+        return (max(self.hull_offsets_m) + self.hull_radius_m + self.separation_m
+                + self.stop_margin_m)
+
     @property
     def Q(self) -> np.ndarray:
         return np.diag(self.q_diag)

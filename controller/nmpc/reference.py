@@ -9,6 +9,7 @@ runs into the outer wall within the 50 m horizon.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -68,6 +69,27 @@ class WaypointPath:
         i = int(np.argmin(dist))
         return float(s[i]), float(dist[i])
 
+    def frame(self, points, s_min: float = 0.0, s_max: float | None = None):
+        """Path coordinates of many points (N, 2): arc length s of the closest point with s in
+        [s_min, s_max], and the signed offset from it (> 0 to starboard of the path)."""
+        cum, L = self.cumulative, self.leg_length
+        s_max = cum[-1] if s_max is None else min(s_max, cum[-1])
+        s_min = min(s_min, s_max)
+        legs = np.nonzero((cum[:-1] <= s_max) & (cum[1:] >= s_min))[0]
+        p = np.asarray(points, float).reshape(-1, 2)
+        d = p[:, None, :] - self.start[legs][None]  # (N, legs, 2)
+        dx, dy = self.delta[legs, 0], self.delta[legs, 1]
+        along = (d[..., 0] * dx + d[..., 1] * dy) / L[legs]
+        s = np.clip(cum[legs] + along, np.maximum(cum[legs], s_min), np.minimum(cum[legs + 1], s_max))
+        t = (s - cum[legs]) / L[legs]
+        rx = d[..., 0] - t * dx
+        ry = d[..., 1] - t * dy
+        best = np.argmin(rx * rx + ry * ry, axis=1)
+        rows = np.arange(len(p))
+        side = (dx[best] * ry[rows, best] - dy[best] * rx[rows, best]) / L[legs][best]
+        offset = np.hypot(rx[rows, best], ry[rows, best])
+        return s[rows, best], np.where(side >= 0.0, offset, -offset)
+
     def at(self, s) -> tuple[np.ndarray, np.ndarray]:
         """Points (n, 2) and leg headings (n,) at arc lengths s, clamped to the ends."""
         s = np.minimum(np.maximum(np.atleast_1d(np.asarray(s, float)), 0.0), self.cumulative[-1])
@@ -100,21 +122,44 @@ def waypoint_path(waypoints) -> WaypointPath:
 
 def reference_trajectory(path: WaypointPath, position, heading_rad: float, speed_mps: float,
                          horizon: int, step_s: float, progress_m: float = 0.0,
-                         search_ahead_m: float | None = None) -> Reference:
+                         search_ahead_m: float | None = None, stop_at_m: float | None = None,
+                         decel_mps2: float = 0.15) -> Reference:
     """r_0..r_horizon for a boat at `position` with `heading_rad`.
 
     The closest point is searched on arc lengths [progress_m, progress_m + search_ahead_m]
     (the whole rest of the path if None): forward only, so the reference never runs back.
+    With `stop_at_m` (an arc length: a blocked way ahead) the reference slows at `decel_mps2`
+    so that it comes to rest there, and holds there; one already past it holds where it is.
     """
     speed_mps = finite_number(speed_mps, "target speed")
     if speed_mps < 0:
         raise InputError(f"target speed: must be a non-negative number of m/s, got {speed_mps!r}")
     s_max = None if search_ahead_m is None else progress_m + search_ahead_m
     s0, distance = path.project(position, s_min=progress_m, s_max=s_max)
-    s = s0 + speed_mps * step_s * np.arange(horizon + 1)
+    t = step_s * np.arange(horizon + 1)
+    if stop_at_m is None:
+        s = s0 + speed_mps * t
+        speed = np.full(horizon + 1, speed_mps)
+    else:
+        s, speed = _stopping(s0, speed_mps, stop_at_m, decel_mps2, t)
     xy, psi = path.at(s)  # leg headings, already continuous along the path
     psi = psi + (unwrap_near(psi[0], heading_rad) - psi[0])  # the turn nearest the boat's
     states = np.zeros((horizon + 1, 8))
     states[:, 0:2], states[:, 2] = xy, psi
-    states[:, 3] = np.where(s < path.length, speed_mps, 0.0)
+    states[:, 3] = np.where(s < path.length, speed, 0.0)
     return Reference(states, float(s0), float(distance), bool(s0 >= path.length - 1e-9))
+
+
+def _stopping(s0: float, speed: float, stop_m: float, decel: float, t: np.ndarray):
+    """Arc lengths and speeds at times t of a point that cruises at `speed` from s0, then
+    brakes at `decel` to rest at `stop_m`: v(s) = min(speed, sqrt(2 decel (stop_m - s)))."""
+    room = max(stop_m - s0, 0.0)
+    braking = speed * speed / (2.0 * decel)  # distance needed from cruise to rest
+    cruise_s = max(room - braking, 0.0) / speed if speed > 0 else 0.0
+    start = min(room, braking)  # distance left to the stop when braking begins
+    tau = np.maximum(t - cruise_s, 0.0)
+    left = np.maximum(math.sqrt(start) - tau * math.sqrt(0.5 * decel), 0.0) ** 2
+    cruising = t < cruise_s
+    s = np.where(cruising, s0 + speed * t, s0 + room - left)
+    v = np.where(cruising, speed, np.sqrt(2.0 * decel * left))
+    return s, np.minimum(v, speed)

@@ -1,0 +1,144 @@
+"""Is the way ahead open? Where the segments leave no passage for the hull, the boat stops.
+
+A barge across the canal, a closed lock gate, a false wall from a bad scan: the route then
+runs through something, and no plan can follow it. Asking the NMPC to, as before, makes its
+QP infeasible while the boat is still at speed; a blocked way is not a solver failure but a
+reason to slow down, stop short and wait. So before each solve the segments are put into the
+route's own coordinates (arc length s along the waypoint path, offset d across it) and swept
+in slabs `slab_m` long: in each slab the offsets the segments occupy split the cross-section
+into free intervals; an interval at least `min_passage_m` wide that shares half of that with
+one reachable in the slab before is reachable. The way is blocked at the first slab with none.
+
+The rule, and why: the passage must be as wide as the two hull circles (2 R_b = 6 m by
+default), the room the NMPC needs to pass with all of its separation d_p given up to the
+slack; a gap narrower than that (a 2.5 m side channel beside a bridge pier) is not a way for
+this boat, while the narrow stretches it is built for (8.5 m, 9 m between piers) are.
+Reachability from slab to slab lets the boat weave between staggered obstacles; a wall
+missing from the scan only ever makes the way look more open, so detection gaps never stop
+the boat, they leave it to the NMPC as before.
+
+`WayAhead` adds the time: blocked at once, clear again only after `resume_after_s` of clear
+sweeps (a missed scan does not restart the boat), and blind (no usable scans) is a stop too,
+at the braking distance from where the boat was when it went blind.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geometry import clip_segments_to_circle, segments_to_endpoints
+from .reference import WaypointPath
+
+
+@dataclass(frozen=True)
+class Stop:
+    """Where the reference must stop (arc length along the path) and why."""
+
+    at_m: float  # the boat's origin stops here
+    reason: str  # "way blocked at 23 m" | "blind: no usable scan"
+    blocked_at_m: float | None = None  # arc length of the obstruction, if blocked
+
+
+def blocked_at(path: WaypointPath, progress_m: float, offset_m: float, segments,
+               min_passage_m: float, lookahead_m: float, lateral_m: float = 30.0,
+               slab_m: float = 1.0, spacing_m: float = 0.25) -> float | None:
+    """Arc length of the first slab ahead of `progress_m` (within `lookahead_m`) where the
+    segments leave no passage at least `min_passage_m` wide that connects back to the boat
+    (at `offset_m` across the path), or None when the way is open."""
+    segs = np.asarray(segments, float).reshape(-1, 4)
+    s_end = min(progress_m + lookahead_m, path.length)
+    if not len(segs) or s_end <= progress_m:
+        return None
+    a, b = segments_to_endpoints(segs)
+    # Only the parts near the way ahead: within reach of the path points from here to s_end.
+    centre, _ = path.at(0.5 * (progress_m + s_end))
+    half = 0.5 * (s_end - progress_m) + lateral_m
+    segs = clip_segments_to_circle(a, b, centre[0], half)
+    if not len(segs):
+        return None
+    a, b = segments_to_endpoints(segs)
+    n = np.maximum(np.ceil(segs[:, 3] / spacing_m).astype(int), 1) + 1
+    which = np.repeat(np.arange(len(segs)), n)
+    frac = (np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n - 1, n)
+    pts = a[which] + frac[:, None] * (b - a)[which]
+    s, d = path.frame(pts, progress_m - slab_m, s_end + slab_m)
+    ahead = (s >= progress_m) & (s <= s_end) & (np.abs(d) <= lateral_m)
+    if not ahead.any():
+        return None
+    slab = ((s[ahead] - progress_m) / slab_m).astype(int)
+    d = d[ahead]
+    n_slabs = int(math.ceil((s_end - progress_m) / slab_m))
+    order = np.lexsort((d, slab))
+    slab, d = slab[order], d[order]
+    # Every free interval of every slab at once: between neighbours in a slab, and from the
+    # edges of the lateral range to a slab's first and last point.
+    first = np.r_[True, slab[1:] != slab[:-1]]
+    last = np.r_[slab[1:] != slab[:-1], True]
+    lo = np.concatenate([np.full(first.sum(), -lateral_m), d[:-1][~first[1:]], d[last]])
+    hi = np.concatenate([d[first], d[1:][~first[1:]], np.full(last.sum(), lateral_m)])
+    k = np.concatenate([slab[first], slab[1:][~first[1:]], slab[last]])
+    wide = hi - lo >= min_passage_m
+    k, lo, hi = k[wide], lo[wide], hi[wide]
+    by_slab = np.lexsort((lo, k))
+    k, lo, hi = k[by_slab].tolist(), lo[by_slab].tolist(), hi[by_slab].tolist()
+    occupied = set(slab.tolist())
+    # Two slabs' intervals connect when they share half a passage: a wall tilted against the
+    # path moves its points a little from slab to slab, which must not connect the water
+    # behind it, while a channel shifting sideways up to 3 m per slab still connects.
+    overlap = 0.5 * min_passage_m
+    reach = [(offset_m - overlap, offset_m + overlap)]  # the boat itself
+    i = 0
+    for j in range(n_slabs):
+        if j not in occupied:
+            reach = [(-lateral_m, lateral_m)]  # nothing in this slab: all of it is open
+            continue
+        gaps = []
+        while i < len(k) and k[i] == j:
+            gaps.append((lo[i], hi[i]))
+            i += 1
+        reach = [g for g in gaps
+                 if any(min(g[1], r1) - max(g[0], r0) >= overlap for r0, r1 in reach)]
+        if not reach:
+            return progress_m + j * slab_m
+    return None
+
+
+class WayAhead:
+    """Blocked, blind or open, step by step, with the hysteresis a noisy scan needs."""
+
+    def __init__(self, min_passage_m: float, stop_short_m: float, decel_mps2: float,
+                 resume_after_s: float):
+        self.min_passage_m = min_passage_m
+        self.stop_short_m = stop_short_m  # from the obstruction to the boat's origin
+        self.decel_mps2 = decel_mps2
+        self.resume_after_s = resume_after_s
+        self.reset()
+
+    def reset(self) -> None:
+        self._stop: Stop | None = None
+        self._clear_s = 0.0
+        self._blind_stop_m: float | None = None
+
+    def update(self, path: WaypointPath, progress_m: float, offset_m: float, speed_mps: float,
+               segments, blind: bool, period_s: float, lookahead_m: float) -> Stop | None:
+        """The stop to make this period, or None to go on."""
+        if blind:
+            if self._blind_stop_m is None:  # brake from where the boat went blind
+                self._blind_stop_m = progress_m + max(speed_mps, 0.0) ** 2 / (2 * self.decel_mps2)
+            self._stop, self._clear_s = Stop(self._blind_stop_m, "blind: no usable scan"), 0.0
+            return self._stop
+        self._blind_stop_m = None
+        at = blocked_at(path, progress_m, offset_m, segments, self.min_passage_m, lookahead_m)
+        if at is not None:
+            self._clear_s = 0.0
+            self._stop = Stop(at - self.stop_short_m, f"way blocked at {at - progress_m:.0f} m", at)
+            return self._stop
+        if self._stop is not None:
+            self._clear_s += period_s
+            if self._clear_s < self.resume_after_s - 1e-9:
+                return self._stop  # hold on until the way has stayed clear a while
+        self._stop, self._clear_s = None, 0.0
+        return None

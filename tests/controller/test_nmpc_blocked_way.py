@@ -1,0 +1,150 @@
+"""A blocked way and blind perception: the NMPC stops short and waits, never fails
+(issue 16); the passage rule, the stopping reference and the closed loop on the model."""
+
+import math
+
+import numpy as np
+import pytest
+
+from controller.errors import InputError
+from controller.model import SMOOTH, plant_step_function
+from controller.nmpc import NmpcConfig, NmpcController
+from controller.nmpc.bench import bend_canal, hull_centres, straight_canal, visible_segments
+from controller.nmpc.passage import WayAhead, blocked_at
+from controller.nmpc.reference import reference_trajectory, waypoint_path
+
+PATH = waypoint_path([[0.0, 0.0], [300.0, 0.0]])
+WALLS = np.array([[150.0, -8.0, 0.0, 300.0], [150.0, 8.0, 0.0, 300.0]])
+
+
+def across(x, y0, y1):
+    """A segment across the canal at x from y0 to y1."""
+    return [x, 0.5 * (y0 + y1), math.pi / 2, abs(y1 - y0)]
+
+
+@pytest.mark.parametrize("obstacle, blocked", [
+    ([], None),
+    ([across(140.0, -7.5, 7.5)], 140.0),  # a barge across a 16 m canal: 0.5 m either side
+    ([across(140.0, -8.0, 2.5)], 140.0),  # 5.5 m left on one side: narrower than 2 R_b
+    ([across(140.0, -8.0, 1.5)], None),  # 6.5 m left: the hull circles pass
+])
+def test_the_way_is_blocked_where_no_passage_of_two_hull_circles_is_left(obstacle, blocked):
+    segs = np.vstack([WALLS, obstacle]) if obstacle else WALLS
+    at = blocked_at(PATH, 100.0, 0.0, segs, 6.0, 60.0)
+    if blocked is None:
+        assert at is None
+    else:
+        assert blocked - 1.0 <= at <= blocked
+
+
+def test_walls_tilted_against_the_path_do_not_open_the_water_behind_them():
+    tilted = np.array([[150.0, -8.0, 1e-3, 300.0], [150.0, 8.0, -1e-3, 300.0]])
+    assert blocked_at(PATH, 100.0, 0.0, np.vstack([tilted, [across(140.0, -8.2, 8.2)]]),
+                      6.0, 60.0) is not None
+
+
+def test_two_piers_with_a_nine_metre_gap_leave_the_way_open():
+    walls = np.array([[150.0, -9.0, 0.0, 300.0], [150.0, 9.0, 0.0, 300.0]])
+    piers = [[122.25, s * 4.5, 0.0, 4.5] for s in (-1, 1)] + \
+            [[122.25, s * 6.5, 0.0, 4.5] for s in (-1, 1)] + \
+            [across(120.0, -6.5, -4.5), across(120.0, 4.5, 6.5)]
+    assert blocked_at(PATH, 100.0, 2.0, np.vstack([walls, piers]), 6.0, 60.0) is None
+
+
+def test_staggered_obstacles_can_be_woven_through():
+    """Two obstacles from alternate walls, each leaving 8 m, 15 m apart: a slalom."""
+    segs = np.vstack([np.array([[150.0, -10.0, 0.0, 300.0], [150.0, 10.0, 0.0, 300.0]]),
+                      [across(130.0, -10.0, 2.0), across(145.0, -2.0, 10.0)]])
+    assert blocked_at(PATH, 100.0, 0.0, segs, 6.0, 60.0) is None
+    # a wall along the middle between them leaves no room to cross over: closed
+    closed = np.vstack([segs, [[137.5, 0.0, 0.0, 14.0]]])
+    assert blocked_at(PATH, 100.0, 0.0, closed, 6.0, 60.0) is not None
+
+
+def test_a_bend_is_not_a_blockage():
+    canal = bend_canal()
+    path = waypoint_path(canal.waypoints)
+    for s in np.arange(0.0, path.length - 20.0, 10.0):
+        xy, _ = path.at(s)
+        segs = visible_segments(canal.segments(), xy[0])
+        assert blocked_at(path, s, 0.0, segs, 6.0, 57.5) is None, s
+
+
+def test_the_stopping_reference_comes_to_rest_at_the_stop_and_holds_past_it():
+    r = reference_trajectory(PATH, [10.0, 0.0], 0.0, 2.0, 25, 1.0, stop_at_m=40.0,
+                             decel_mps2=0.1)
+    s, u = r.states[:, 0], r.states[:, 3]
+    assert np.all(np.diff(s) >= 0) and s.max() == pytest.approx(40.0)
+    assert np.all(np.diff(u) <= 1e-12) and u[0] == 2.0 and u[-1] == 0.0
+    assert np.all(np.abs(np.diff(u)) <= 0.1 + 1e-9)  # at most decel * Ts between stages
+    past = reference_trajectory(PATH, [45.0, 0.0], 0.0, 2.0, 25, 1.0, stop_at_m=40.0)
+    assert np.all(past.states[:, 0] == 45.0) and np.all(past.states[:, 3] == 0.0)
+
+
+def test_the_way_ahead_resumes_only_after_it_stayed_clear():
+    way = WayAhead(6.0, 8.0, 0.06, resume_after_s=1.0)
+    barge = np.vstack([WALLS, [across(140.0, -8.0, 8.0)]])
+    stop = way.update(PATH, 100.0, 0.0, 2.0, barge, False, 0.1, 60.0)
+    assert stop is not None and stop.at_m == pytest.approx(stop.blocked_at_m - 8.0)
+    assert stop.reason.startswith("way blocked at 4")
+    held = [way.update(PATH, 100.0, 0.0, 0.0, WALLS, False, 0.1, 60.0) for _ in range(10)]
+    assert all(h is not None for h in held[:9]) and held[9] is None
+    blind = way.update(PATH, 100.0, 0.0, 1.2, WALLS, True, 0.1, 60.0)
+    assert blind.reason.startswith("blind") and blind.at_m == pytest.approx(100.0 + 1.44 / 0.12)
+
+
+def test_passage_settings_are_checked():
+    for name in ("min_passage_m", "stop_decel_mps2"):
+        with pytest.raises(InputError, match=name):
+            NmpcConfig(**{name: 0.0})
+    with pytest.raises(InputError, match="stop_margin_m"):
+        NmpcConfig(stop_margin_m=-1.0)
+
+
+def _loop(ctl, walls, barge, steps, barge_until_s=math.inf, blind_from_to=(math.inf, math.inf)):
+    """The NMPC on the smooth model in a straight 16 m canal; the barge's segment is seen
+    while it lies there, nothing is seen while blind."""
+    cfg = ctl.config
+    plant = plant_step_function(SMOOTH)
+    p = cfg.boat.as_vector()
+    rate_max = np.array([cfg.dnT_max, cfg.dnS_max])
+    x = np.array([60.0, 0.0, 0.0, 2.0, 0.0, 0.0])
+    act = np.array([47.0, 0.0])
+    rows = []
+    for k in range(steps):
+        t = k * cfg.control_period_s
+        segs = walls if t >= barge_until_s else np.vstack([walls, barge])
+        segs = visible_segments(segs, x, 60.0)
+        blind = blind_from_to[0] <= t < blind_from_to[1]
+        st = ctl.step(x, act, segs, [[0.0, 0.0], [300.0, 0.0]], 2.0, blind=blind)
+        bow = hull_centres(x)[0]
+        rows.append((t, x[0], math.hypot(x[3], x[4]), st.stats.waiting, st.stats.fallback,
+                     barge[0] - 0.5 * 0.0 - bow[0]))
+        for _ in range(2):
+            xn, an, _ = plant(x, act, st.command, p, (0.0, 0.0), rate_max, 0.05)
+            x, act = np.asarray(xn).ravel(), np.asarray(an).ravel()
+    return rows
+
+
+def test_a_barge_across_the_way_stops_the_boat_short_and_it_goes_on_when_it_is_moved():
+    ctl = NmpcController(NmpcConfig())
+    walls = WALLS.copy()
+    barge = np.array(across(150.0, -7.5, 7.5))
+    rows = _loop(ctl, walls, barge, 1600, barge_until_s=110.0)
+    waiting = [r for r in rows if r[3]]
+    assert waiting and waiting[0][3].startswith("way blocked")
+    held = [r for r in rows if r[3] and r[0] > 90.0]
+    assert held and max(r[2] for r in held) < 0.1  # at rest while it waits
+    bow_gap = min(r[5] for r in rows if r[0] < 110.0)  # bow circle centre to the barge
+    assert bow_gap >= NmpcConfig().hull_radius_m + NmpcConfig().separation_m - 0.5
+    assert not any(r[4] for r in rows)  # no fallback plan, no failure
+    assert rows[-1][1] > 200.0  # on its way again once the barge is gone
+
+
+def test_blind_perception_slows_the_boat_to_a_stop_and_it_goes_on_when_scans_return():
+    ctl = NmpcController(NmpcConfig())
+    rows = _loop(ctl, WALLS, np.array(across(400.0, -7.5, 7.5)), 900, blind_from_to=(5.0, 60.0))
+    blind = [r for r in rows if r[3].startswith("blind")]
+    assert blind and blind[0][0] == pytest.approx(5.0)
+    assert max(r[2] for r in rows if 50.0 <= r[0] < 60.0) < 0.1
+    assert rows[-1][2] > 1.0 and not any(r[4] for r in rows)
