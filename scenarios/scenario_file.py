@@ -40,6 +40,10 @@ class Criteria:
     max_mean_cross_track_m: float | None = None
     min_clearance_where_wide_m: float | None = None  # where the canal is >= 2 (R_b + d_p) wide
     max_mean_centre_offset_narrow_m: float | None = None  # where it is narrower than that
+    max_fallback_steps: int | None = None  # steps on a fallback plan (a failed solve)
+    min_first_detected_m: float | None = None  # each obstacle first seen at least this far off
+    min_time_held_s: float | None = None  # held at rest before a blocked way at least this long
+    max_speed_while_held_mps: float | None = None  # and no faster than this while held
 
 
 @dataclass(frozen=True)
@@ -71,6 +75,8 @@ class Scenario:
     gps: GpsConfig = GpsConfig()
     ahrs: AhrsConfig = AhrsConfig()
     lidar_noise: LidarNoise = LidarNoise()
+    lidar_outages_s: tuple = ()  # (start, end) spans with no scan (a sensor fault, for tests)
+    max_scan_age_s: float = 1.0  # the last segments stand in this long, then "blind"
 
 
 # -- small typed readers that name the field -------------------------------------------------
@@ -489,7 +495,7 @@ def parse_scenario(text: str, source: str = "<string>", path: Path | None = None
                     math.radians(mount.number("yaw_deg", 0.0)))
     mount.done()
     gps, ahrs = _gps(sens.table("gps")), _ahrs(sens.table("ahrs"))
-    lidar_noise = _lidar_noise(sens.table("lidar"))
+    lidar_noise, outages, max_scan_age = _lidar(sens.table("lidar"))
     sens.done()
 
     plant = doc.table("plant") or _Table({}, "plant", source)
@@ -522,6 +528,10 @@ def parse_scenario(text: str, source: str = "<string>", path: Path | None = None
         max_mean_cross_track_m=crit.number("max_mean_cross_track_m", None, low=0),
         min_clearance_where_wide_m=crit.number("min_clearance_where_wide_m", None, low=0),
         max_mean_centre_offset_narrow_m=crit.number("max_mean_centre_offset_narrow_m", None, low=0),
+        max_fallback_steps=crit.integer("max_fallback_steps", None, low=0),
+        min_first_detected_m=crit.number("min_first_detected_m", None, low=0),
+        min_time_held_s=crit.number("min_time_held_s", None, low=0),
+        max_speed_while_held_mps=crit.number("max_speed_while_held_mps", None, low=0),
     )
     crit.done()
     doc.done()
@@ -534,7 +544,8 @@ def parse_scenario(text: str, source: str = "<string>", path: Path | None = None
         controller=controller, controller_params=ctrl_params, d_p_m=d_p,
         controller_options=options, criteria=criteria, default_test=default_test,
         snapshot_times_s=snaps, geodetic_origin=origin, replay_mount=replay_mount,
-        gps=gps, ahrs=ahrs, lidar_noise=lidar_noise,
+        gps=gps, ahrs=ahrs, lidar_noise=lidar_noise, lidar_outages_s=outages,
+        max_scan_age_s=max_scan_age,
     )
 
 
@@ -594,10 +605,24 @@ def _ahrs(t: _Table | None) -> AhrsConfig:
     return AhrsConfig(**{k: v for k, v in given.items() if v is not None})
 
 
-def _lidar_noise(t: _Table | None) -> LidarNoise:
-    """[sensors.lidar]: the simulated LiDAR's imperfections, named as in LidarNoise."""
+def _lidar(t: _Table | None) -> tuple[LidarNoise, tuple, float]:
+    """[sensors.lidar]: the simulated LiDAR's imperfections (named as in LidarNoise), its
+    outages (`outages_s`: [start, end] spans with no scan) and how long the last segments
+    bridge missing scans (`max_scan_age_s`)."""
     if t is None:
-        return LidarNoise()
+        return LidarNoise(), (), 1.0
+    outages = []
+    if t.has("outages_s"):
+        spans = t.raw("outages_s")
+        ok = isinstance(spans, list) and all(
+            isinstance(s, list) and len(s) == 2 and all(_is_number(v) and math.isfinite(v)
+                                                        for v in s) and 0 <= s[0] < s[1]
+            for s in spans)
+        if not ok:
+            raise t.err("outages_s", f"expected a list of [start_s, end_s] pairs with "
+                        f"0 <= start < end, got {spans!r}")
+        outages = [(float(a), float(b)) for a, b in spans]
+    max_age = t.number("max_scan_age_s", 1.0, low=0)
     given = {
         "range_sigma_m": t.number("range_sigma_m", None, low=0),
         "dropout": t.number("dropout", None, low=0, high=1),
@@ -612,7 +637,7 @@ def _lidar_noise(t: _Table | None) -> LidarNoise:
     if noise.dropout + noise.water_speckle > 1.0:
         raise t.err("water_speckle", f"dropout + water_speckle must be <= 1 (both are chances "
                     f"per return), got {noise.dropout:g} + {noise.water_speckle:g}")
-    return noise
+    return noise, tuple(outages), max_age
 
 
 # -- controller options ----------------------------------------------------------------------

@@ -41,7 +41,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from scenarios.loop.closed_loop import terminal_progress
+    from scenarios.loop.closed_loop import terminal_events, terminal_progress
     from scenarios.loop.runner import check_criteria, run_scenario
     from scenarios.scenario_file import load_scenario
 
@@ -51,7 +51,8 @@ def run(args) -> int:
     progress = terminal_progress() if sys.stderr.isatty() else None
     result = run_scenario(scenario, out, controller=controller, seed=args.seed,
                           plant=args.plant, plots=not args.no_plots, progress=progress,
-                          parallel_perception=False if args.serial_perception else None)
+                          parallel_perception=False if args.serial_perception else None,
+                          events=terminal_events(progress is not None))
     if progress:
         sys.stderr.write("\n")
     s, t = result.summary, result.timing

@@ -1,14 +1,17 @@
 """The closed loop: plant, sensors, navigation filter, perception and controller on sim time.
 
-One control period (0.1 s) is: perceive segments, run the controller on the estimated state,
-then step the plant in IMU periods (0.01 s) with the command held, fusing AHRS every IMU
-period and GPS at its rate (5 Hz by default); a plant with its own estimate, such as an
-autopilot's EKF over MAVLink, replaces the sensors and the filter. Every control step is appended to the log as it
-happens, so an interrupted run loses nothing; the summary and plots come at the end.
+One control period (0.1 s) is: perceive segments (cleaned, and bridged over a missing scan
+for a while by `controller.perception.feed`, or "blind" after that), run the controller on
+the estimated state, then step the plant in IMU periods (0.01 s) with the command held,
+fusing AHRS every IMU period and GPS at its rate (5 Hz by default); a plant with its own
+estimate, such as an autopilot's EKF over MAVLink, replaces the sensors and the filter.
+Every control step is appended to the log as it happens, so an interrupted run loses
+nothing; the summary and plots come at the end. What perception delivers never ends a run.
 """
 
 from __future__ import annotations
 
+import inspect
 import json
 import math
 import sys
@@ -21,6 +24,7 @@ import numpy as np
 
 from controller.geometry import Polyline
 from controller.navigation import NavigationFilter
+from controller.perception.feed import FeedConfig, SegmentFeed
 from scenarios.results import metrics
 from scenarios.plants.plant import Plant, PlantFailure, PlantOutput
 from scenarios.loop.run_log import RunLog
@@ -44,14 +48,16 @@ class Controller(Protocol):
     name: str
 
     def step(self, time_s: float, state: np.ndarray, actuators: np.ndarray,
-             segments: np.ndarray) -> Decision: ...
+             segments: np.ndarray, blind: bool = False) -> Decision: ...
+    # (`blind` is optional: a controller without it is called with the segments only)
 
 
 class Perception(Protocol):
-    """Where the segments come from: detections from a simulated LiDAR, or known walls."""
+    """Where the segments come from: detections from a simulated LiDAR, or known walls.
+    None: no scan this period (missing or empty)."""
 
     def segments(self, time_s: float, true_state: np.ndarray,
-                 estimated_state: np.ndarray) -> np.ndarray: ...
+                 estimated_state: np.ndarray) -> np.ndarray | None: ...
 
 
 @dataclass(frozen=True)
@@ -68,6 +74,10 @@ class LoopConfig:
     current_ne: tuple = (0.0, 0.0)
     seed: int = 0
     snapshot_times_s: tuple = ()  # instants at which to keep the plan for plots
+    outline_removed_at_s: tuple = ()  # per outline: when it leaves the water (None: never)
+    obstacles: tuple = ()  # metrics.WatchedObstacle: per-obstacle clearance and detection
+    lidar_outages_s: tuple = ()  # (start, end) spans of simulation time with no scan
+    feed: FeedConfig = FeedConfig()  # how long the last segments bridge missing scans
 
 
 @dataclass
@@ -99,8 +109,10 @@ class _Timer:
 def run_closed_loop(plant: Plant, controller: Controller, perception: Perception,
                     state0, cfg: LoopConfig, out_dir: Path,
                     progress: Callable[[float, float], None] | None = None,
-                    scenario_name: str = "") -> RunResult:
-    """Run one scenario to the goal, the time limit, or a controller failure."""
+                    scenario_name: str = "",
+                    events: Callable[[float, str], None] | None = None) -> RunResult:
+    """Run one scenario to the goal, the time limit, or a controller failure. `events(t,
+    text)` hears when the controller starts and stops waiting (a blocked way, blindness)."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     timer = _Timer()
@@ -119,22 +131,35 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
 
     command = np.zeros(2)
     rows_t, rows_clear, rows_cmd, rows_xt, solve_s = [], [], [], [], []
+    rows_waiting, rows_speed = [], []
     snapshots: list[Snapshot] = []
     status, reached = "time limit", False
-    contact = metrics.HullContact(cfg.outlines)
-    canal_width = metrics.CanalWidth(cfg.outlines)
+    world = _ChangingOutlines(cfg)
+    feed = SegmentFeed(cfg.feed)
+    watch = metrics.ObstacleWatch(cfg.obstacles)
     rows_width: list[tuple[float, float, float]] = []
     collided = False
+    fallback_steps = 0
+    waiting_before = ""
+    takes_blind = "blind" in inspect.signature(controller.step).parameters
     wall0 = time.perf_counter()
     with RunLog(out_dir / "log.csv", out_dir / "segments.csv") as log:
         imu_k = 0
         for k in range(n_steps):
             t = k * cfg.control_period_s
             est = nav.state if own_estimate else np.asarray(out.estimate, float)
+            outlines, contact, canal_width = world.at(t)
             t0 = time.perf_counter()
-            segs = np.asarray(perception.segments(t, out.state, est), float).reshape(-1, 4)
+            found = perception.segments(t, out.state, est)
+            if any(a <= t < b for a, b in cfg.lidar_outages_s):
+                found = None  # the scan is lost (a configured outage)
+            view = feed.update(t, found, est[:2])
+            segs = view.segments
             t1 = time.perf_counter()
-            decision = controller.step(t, est, out.actuators.copy(), segs)
+            if takes_blind:
+                decision = controller.step(t, est, out.actuators.copy(), segs, blind=view.blind)
+            else:  # a controller of the older interface: it knows no blindness
+                decision = controller.step(t, est, out.actuators.copy(), segs)
             t2 = time.perf_counter()
             timer.add("perception", t1 - t0)
             timer.add("controller", t2 - t1)
@@ -146,13 +171,22 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
                 command = np.clip(np.asarray(decision.command, float).reshape(2), -100, 100)
             prev = rows_cmd[-1] if rows_cmd else np.zeros(2)
             rate = (command - prev) / cfg.control_period_s
-            clear = metrics.clearance(out.state[None, :3], cfg.outlines)[0]
+            clear = metrics.clearance(out.state[None, :3], outlines)[0]
             xt = path.cross_track(out.state[:2])
             width = canal_width.at(out.state)
+            watch.update(t, out.state, segs)
+            waiting = str(decision.stats.get("waiting", ""))
+            fallback_steps += bool(decision.stats.get("fallback", ""))
             log.write_step(
                 t, out.state, est, command, rate, out.actuators, clear, xt,
-                (t2 - t1) * 1e3, decision, segs, width,
+                (t2 - t1) * 1e3, decision, segs, width, view,
             )
+            why = waiting.split(" at ")[0].split(":")[0]  # "way blocked", "blind", ""
+            if events is not None and why != waiting_before:
+                events(t, f"waiting: {waiting}" if waiting else "the way is clear: going on")
+            waiting_before = why
+            rows_waiting.append(bool(waiting))
+            rows_speed.append(float(np.hypot(out.state[3], out.state[4])))
             rows_width.append(width)
             rows_t.append(t)
             rows_clear.append(clear)
@@ -214,13 +248,21 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
         "max_cross_track_m": _round(float(np.max(rows_xt))) if rows_xt else None,
         "final_distance_to_goal_m": _round(float(np.hypot(*(out.state[:2] - goal)))),
         "steps": len(rows_t),
+        "fallback_steps": fallback_steps,
     }
+    episodes = metrics.waiting_episodes(rows_waiting, rows_speed, cfg.control_period_s)
+    summary.update({k: _round(v) for k, v in episodes.items()})
+    summary["time_blind_s"] = _round(feed.blind_periods * cfg.control_period_s)
+    summary["missing_scans"] = feed.missing_scans
+    summary["segments_cleaned"] = dict(feed.dropped_total)
     # separation by place: kept where the canal allows it, the middle where it does not
     widths = np.array(rows_width, float).reshape(-1, 3)
     by_place = metrics.separation_by_place(clear, widths[:, 0], widths[:, 1], widths[:, 2],
                                            cfg.desired_separation_m, cfg.control_period_s)
     summary["narrow_below_m"] = 2 * cfg.desired_separation_m
     summary.update({k: _round(v) for k, v in by_place.items()})
+    if cfg.obstacles:
+        summary["obstacles"] = watch.summary()
     stats = metrics.TimingStats.of(solve_s)
     timing = {
         "controller": summary["controller"],
@@ -247,6 +289,25 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
     return RunResult(summary, timing, snapshots, out_dir / "log.csv")
 
 
+class _ChangingOutlines:
+    """The true outlines present at a time (an obstacle may be removed during the run), with
+    the collision test and the canal width over them, rebuilt only when the set changes."""
+
+    def __init__(self, cfg: LoopConfig):
+        self._outlines = tuple(cfg.outlines)
+        self._removed = tuple(cfg.outline_removed_at_s) or (None,) * len(self._outlines)
+        self._key = None
+        self._current = None
+
+    def at(self, time_s: float):
+        key = tuple(r is None or time_s < r for r in self._removed)
+        if key != self._key:
+            present = tuple(o for o, here in zip(self._outlines, key) if here)
+            self._key = key
+            self._current = (present, metrics.HullContact(present), metrics.CanalWidth(present))
+        return self._current
+
+
 def _round(x: float, digits: int = 6):
     """Round for a stable, readable summary (the log keeps full precision)."""
     if x is None or not math.isfinite(x):
@@ -269,3 +330,14 @@ def terminal_progress(stream=sys.stderr) -> Callable[[float, float], None]:
         stream.flush()
 
     return show
+
+
+def terminal_events(redraw: bool, stream=sys.stderr) -> Callable[[float, str], None]:
+    """Print what the controller starts or stops waiting for, one line each (below the
+    progress bar when there is one)."""
+
+    def say(t: float, text: str) -> None:
+        stream.write(f"{chr(10) if redraw else ''}t = {t:.1f} s: {text}\n")
+        stream.flush()
+
+    return say

@@ -21,7 +21,7 @@ class LosPidController:
         self._tracker.set_path(waypoints)
         self._dt = control_period_s
 
-    def step(self, time_s, state, actuators, segments) -> Decision:
+    def step(self, time_s, state, actuators, segments, blind=False) -> Decision:
         if time_s == 0.0:
             self._tracker.reset(actuators)
         command = self._tracker.step(state, self._dt)
@@ -61,20 +61,27 @@ class NmpcController:
         self._speed = scenario.target_speed_mps
         self._current = scenario.current_ne if self._knows_current else (0.0, 0.0)
 
-    def step(self, time_s, state, actuators, segments) -> Decision:
+    def step(self, time_s, state, actuators, segments, blind=False) -> Decision:
         from controller.errors import SolverError
 
         try:
             st = self.core.step(state, actuators, segments, self._waypoints, self._speed,
-                                self._current)
+                                self._current, blind=blind)
         except SolverError as exc:
             return Decision(command=np.zeros(2), ok=False, status=str(exc))
         return Decision(
-            command=st.command, status=st.stats.status if st.stats.ok else f"fallback:{st.stats.fallback}",
-            predicted=st.states, slack_m=st.max_slack_m, segments_used=segments,
+            command=st.command, status=_status(st), predicted=st.states,
+            slack_m=st.max_slack_m, segments_used=segments,
             stats={"qp_iterations": st.stats.qp_iterations, "fallback": st.stats.fallback,
-                   "segments_dropped": st.stats.segments_dropped},
+                   "segments_dropped": st.stats.segments_dropped, "waiting": st.stats.waiting},
         )
+
+
+def _status(st) -> str:
+    """The log's status of an NMPC step: a fallback first, then why it waits, else the QP's."""
+    if not st.stats.ok or st.stats.fallback:  # a failed solve (retried from the safe guess)
+        return f"fallback:{st.stats.fallback}"
+    return f"waiting: {st.stats.waiting}" if st.stats.waiting else st.stats.status
 
 
 class PlannedLosPid:
@@ -101,11 +108,11 @@ class PlannedLosPid:
         self._predicted = None
         self._status = "ok"
 
-    def step(self, time_s, state, actuators, segments) -> Decision:
+    def step(self, time_s, state, actuators, segments, blind=False) -> Decision:
         if self._k == 0:
             self._tracker.reset(actuators)
         if self._k % self._every == 0:
-            path, ok, status, predicted = self._plan(state, actuators, segments)
+            path, ok, status, predicted = self._plan(state, actuators, segments, blind)
             self._status = status
             if ok and len(path) >= 2:
                 self._tracker.set_path(self._then_waypoints(path), state)
@@ -134,10 +141,10 @@ def nmpc_planned_los_pid(scenario) -> PlannedLosPid:
     core = Core(NmpcConfig(separation_m=scenario.d_p_m, boat=scenario.controller_params,
                            control_period_s=1.0), method="sqp")
 
-    def plan(state, actuators, segments):
+    def plan(state, actuators, segments, blind):
         try:
             st = core.step(state, actuators, segments, scenario.waypoints,
-                           scenario.target_speed_mps, elapsed_s=1.0)
+                           scenario.target_speed_mps, elapsed_s=1.0, blind=blind)
         except SolverError as exc:  # keep tracking the last plan; the planner recovers next time
             core.reset()
             return None, False, f"planner failed: {exc}", None
@@ -154,7 +161,7 @@ def lexicographic_los_pid(scenario) -> PlannedLosPid:
     planner = LexicographicPlanner(scenario.waypoints,
                                    LexicographicConfig(separation_m=scenario.d_p_m))
 
-    def plan(state, actuators, segments):
+    def plan(state, actuators, segments, blind):  # the Appendix's planner knows no blindness
         p = planner.plan(state[:3], segments)
         return p.path, True, p.status, p.states
 

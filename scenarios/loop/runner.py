@@ -84,11 +84,34 @@ lexicographic: baseline 2 (the Appendix's planner + LOS-PID); los-pid-waypoints:
 waypoints with no planner (blind to walls: a reference point, not a baseline)."""
 
 
+def loop_config(scenario: Scenario, seed: int) -> LoopConfig:
+    """The closed loop's settings for a scenario: the true outlines a boat of our air draft
+    can hit (and when a removed obstacle leaves), the obstacles to watch, the sensors."""
+    from controller.perception.feed import FeedConfig
+    from scenarios.results.metrics import WatchedObstacle
+
+    world = scenario.world
+    hit = [o for o in world.obstacles if o.z_bottom_m < AIR_DRAFT_M]
+    return LoopConfig(
+        duration_s=scenario.duration_s, waypoints=scenario.waypoints,
+        outlines=tuple(world.wall_polylines()) + tuple(o.closed for o in hit),
+        outline_removed_at_s=(None,) * len(world.walls) + tuple(o.remove_at_s for o in hit),
+        obstacles=tuple(WatchedObstacle(o.name, o.kind, o.closed, o.remove_at_s) for o in hit),
+        desired_separation_m=R_B_M + scenario.d_p_m, goal_radius_m=scenario.goal_radius_m,
+        current_ne=scenario.current_ne, seed=seed, gps=scenario.gps, ahrs=scenario.ahrs,
+        snapshot_times_s=scenario.snapshot_times_s or _default_snapshots(scenario),
+        lidar_outages_s=scenario.lidar_outages_s,
+        feed=FeedConfig(max_age_s=scenario.max_scan_age_s),
+    )
+
+
 def run_scenario(scenario: Scenario, out_dir: Path, controller: str | None = None,
                  seed: int | None = None, plant: str = "fmu", plots: bool = True,
-                 progress=None, parallel_perception: bool | None = None) -> RunResult:
+                 progress=None, parallel_perception: bool | None = None,
+                 events=None) -> RunResult:
     """Run one scenario into `out_dir` (log.csv, summary.json, timing.json, PNG plots).
-    `parallel_perception` changes the wall time only, never the results."""
+    `parallel_perception` changes the wall time only, never the results; `events(t, text)`
+    hears when the controller starts or stops waiting."""
     if plant not in PLANTS:
         raise InputError(f"plant {plant!r} is not available (choose from: {', '.join(PLANTS)})")
     out_dir = Path(out_dir)
@@ -105,16 +128,11 @@ def run_scenario(scenario: Scenario, out_dir: Path, controller: str | None = Non
     except BaseException:
         _close(perception)
         raise
-    cfg = LoopConfig(
-        duration_s=scenario.duration_s, waypoints=scenario.waypoints,
-        outlines=tuple(scenario.world.surfaces(AIR_DRAFT_M)),
-        desired_separation_m=R_B_M + scenario.d_p_m, goal_radius_m=scenario.goal_radius_m,
-        current_ne=scenario.current_ne, seed=seed, gps=scenario.gps, ahrs=scenario.ahrs,
-        snapshot_times_s=scenario.snapshot_times_s or _default_snapshots(scenario),
-    )
+    cfg = loop_config(scenario, seed)
     try:
         result = run_closed_loop(the_plant, ctrl, perception, scenario.initial_state, cfg,
-                                 out_dir, progress=progress, scenario_name=scenario.name)
+                                 out_dir, progress=progress, scenario_name=scenario.name,
+                                 events=events)
     finally:
         the_plant.close()
         _close(perception)
@@ -170,6 +188,21 @@ def check_criteria(scenario: Scenario, summary: dict) -> list[str]:
         elif wide < c.min_clearance_where_wide_m:
             failed.append(f"min clearance where the canal is at least {width:g} m wide "
                           f"{wide} m < {c.min_clearance_where_wide_m} m")
+    if c.max_fallback_steps is not None and s.get("fallback_steps", 0) > c.max_fallback_steps:
+        failed.append(f"{s['fallback_steps']} steps on a fallback plan > {c.max_fallback_steps}")
+    if c.min_first_detected_m is not None:
+        for o in s.get("obstacles", []):
+            seen = o["first_detected_m"]
+            if seen is None or seen < c.min_first_detected_m:
+                failed.append(f"obstacle {o['name']!r} first detected "
+                              f"{'never' if seen is None else f'{seen:.1f} m away'} "
+                              f"(< {c.min_first_detected_m} m)")
+    if c.min_time_held_s is not None and s.get("time_held_s", 0.0) < c.min_time_held_s:
+        failed.append(f"held at rest for {s.get('time_held_s', 0.0)} s < {c.min_time_held_s} s")
+    held = s.get("max_speed_while_held_mps")
+    if c.max_speed_while_held_mps is not None and held is not None \
+            and held > c.max_speed_while_held_mps:
+        failed.append(f"speed while held {held} m/s > {c.max_speed_while_held_mps} m/s")
     offset = s["mean_centre_offset_narrow_m"]
     if c.max_mean_centre_offset_narrow_m is not None:
         if offset is None:

@@ -10,7 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controller.geometry import Polyline, distance_to_polylines, polyline_legs, segments_cross
+from controller.geometry import (Polyline, distance_to_polylines, point_segment_distance,
+                                 polyline_legs, segments_cross)
 from controller.nmpc.slack_reference import walls_abeam
 
 HULL_CIRCLE_OFFSETS_M = (2.0, -2.0)
@@ -157,3 +158,81 @@ class TimingStats:
         if ms.size == 0:
             return cls(0.0, 0.0, 0.0)
         return cls(float(ms.mean()), float(np.percentile(ms, 99)), float(ms.max()))
+
+
+@dataclass(frozen=True)
+class WatchedObstacle:
+    """An obstacle whose clearance and first detection the summary reports."""
+
+    name: str
+    kind: str
+    outline: np.ndarray  # (K + 1, 2) closed outline
+    removed_at_s: float | None = None
+
+
+class ObstacleWatch:
+    """Per obstacle: the least hull-circle clearance and when, and how far from the boat it
+    was when perception first reported a segment on it (a segment whose middle lies within
+    `on_m` of an edge of its outline, within `angle_deg` of that edge's direction)."""
+
+    def __init__(self, obstacles, on_m: float = 0.5, angle_deg: float = 10.0):
+        self.obstacles = tuple(obstacles)
+        self._legs = [polyline_legs([o.outline]) for o in self.obstacles]
+        self._on_m, self._cos = on_m, float(np.cos(np.radians(angle_deg)))
+        n = len(self.obstacles)
+        self.min_clearance = np.full(n, np.inf)
+        self.min_at = np.full(n, np.nan)
+        self.first_seen_m = np.full(n, np.nan)
+        self.first_seen_at = np.full(n, np.nan)
+
+    def update(self, time_s: float, pose, segments) -> None:
+        centres = hull_circle_centres(np.asarray(pose, float)[None, :3])[0]
+        segs = np.asarray(segments, float).reshape(-1, 4)
+        for k, (o, (a, b)) in enumerate(zip(self.obstacles, self._legs)):
+            if o.removed_at_s is not None and time_s >= o.removed_at_s:
+                continue
+            d = float(point_segment_distance(centres, a, b).min())
+            if d < self.min_clearance[k]:
+                self.min_clearance[k], self.min_at[k] = d, time_s
+            if np.isnan(self.first_seen_m[k]) and len(segs) and self._seen(segs, a, b):
+                self.first_seen_m[k] = float(point_segment_distance(pose[:2], a, b).min())
+                self.first_seen_at[k] = time_s
+
+    def _seen(self, segs, a, b) -> bool:
+        dist = point_segment_distance(segs[:, :2], a, b)  # (M, legs)
+        edge = b - a
+        edge = edge / np.maximum(np.hypot(edge[:, 0], edge[:, 1]), 1e-12)[:, None]
+        u = np.column_stack([np.cos(segs[:, 2]), np.sin(segs[:, 2])])
+        parallel = np.abs(u @ edge.T) >= self._cos
+        return bool(((dist <= self._on_m) & parallel).any())
+
+    def summary(self) -> list[dict]:
+        def num(x):
+            return None if not np.isfinite(x) else round(float(x), 6)
+
+        return [{"name": o.name, "kind": o.kind, "min_clearance_m": num(self.min_clearance[k]),
+                 "min_clearance_at_s": num(self.min_at[k]),
+                 "first_detected_m": num(self.first_seen_m[k]),
+                 "first_detected_at_s": num(self.first_seen_at[k])}
+                for k, o in enumerate(self.obstacles)]
+
+
+def waiting_episodes(waiting, speed_mps, dt: float, at_rest_mps: float = 0.1) -> dict:
+    """How long the controller waited (a stop made for a blocked way or blindness), how long
+    of that the boat was held at rest (from the first step below `at_rest_mps` in each
+    episode to its end), and the highest speed while held."""
+    waiting = np.asarray(waiting, bool)
+    speed = np.asarray(speed_mps, float)
+    held = np.zeros(len(waiting), bool)
+    resting = False
+    for k in range(len(waiting)):
+        if not waiting[k]:
+            resting = False
+            continue
+        resting = resting or speed[k] < at_rest_mps
+        held[k] = resting
+    return {
+        "time_waiting_s": float(np.count_nonzero(waiting) * dt),
+        "time_held_s": float(np.count_nonzero(held) * dt),
+        "max_speed_while_held_mps": float(speed[held].max()) if held.any() else None,
+    }

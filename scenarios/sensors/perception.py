@@ -23,11 +23,19 @@ class KnownWalls:
     def __init__(self, world: CanalWorld, range_m: float = 50.0, air_draft_m: float = np.inf,
                  tolerance_m: float = 0.05):
         self.range_m = range_m
-        lines = [simplify_polyline(p, tolerance_m) for p in world.surfaces(air_draft_m)]
-        self._a, self._b = polyline_legs(lines)
+        hit = [o for o in world.obstacles if o.z_bottom_m < air_draft_m]
+        lines = [simplify_polyline(p, tolerance_m)
+                 for p in world.wall_polylines() + [o.closed for o in hit]]
+        self._removed = [None] * len(world.walls) + [o.remove_at_s for o in hit]
+        self._lines = lines
+        self._legs: dict = {}  # which lines are present -> their legs
 
     def segments(self, time_s, true_state, estimated_state) -> np.ndarray:
-        return clip_segments_to_circle(self._a, self._b, np.asarray(true_state)[:2], self.range_m)
+        key = tuple(r is None or time_s < r for r in self._removed)
+        if key not in self._legs:
+            self._legs[key] = polyline_legs([p for p, here in zip(self._lines, key) if here])
+        a, b = self._legs[key]
+        return clip_segments_to_circle(a, b, np.asarray(true_state)[:2], self.range_m)
 
 
 class LidarPerception:
@@ -53,6 +61,8 @@ class LidarPerception:
         points = self.simulator.scan(true_state[:3], speed_mps=float(true_state[3]))
         t1 = time.perf_counter()
         self.points_per_scan.append(len(points))
+        if not len(points):
+            return None  # an empty scan is a failed one (a working LiDAR sees its own hull)
         found = detect_segments(points, np.asarray(estimated_state, float)[:3], self.detection)
         self.time_s["lidar_scan"] += t1 - t0
         self.time_s["detection"] += time.perf_counter() - t1

@@ -61,3 +61,20 @@ def test_met_criteria_give_no_sentence(scenario):
     # criteria left out are not checked, whatever the summary says
     bad = {**SUMMARY, "min_clearance_m": 0.1, "min_clearance_where_wide_m": None}
     assert check_criteria(replace(scenario, criteria=Criteria(reach_goal=True)), bad) == []
+
+
+@pytest.mark.parametrize("criteria, changes, words", [
+    (dict(max_fallback_steps=0), dict(fallback_steps=2), "2 steps on a fallback plan > 0"),
+    (dict(min_time_held_s=20.0), dict(time_held_s=5.0), "held at rest for 5.0 s < 20.0 s"),
+    (dict(max_speed_while_held_mps=0.1), dict(max_speed_while_held_mps=0.3),
+     "speed while held 0.3 m/s > 0.1 m/s"),
+    (dict(min_first_detected_m=40.0),
+     dict(obstacles=[{"name": "pier", "first_detected_m": 12.5}]),
+     "obstacle 'pier' first detected 12.5 m away (< 40.0 m)"),
+    (dict(min_first_detected_m=40.0), dict(obstacles=[{"name": "pier", "first_detected_m": None}]),
+     "obstacle 'pier' first detected never"),
+])
+def test_the_waiting_and_detection_criteria_name_what_failed(scenario, criteria, changes, words):
+    failed = check_criteria(replace(scenario, criteria=Criteria(**criteria)),
+                            {**SUMMARY, **changes})
+    assert len(failed) == 1 and words in failed[0]

@@ -24,7 +24,7 @@ def test_a_kept_plan_that_runs_out_does_not_turn_the_boat_around():
     first = np.array([[0.0, 0.0], [30.0, 0.0]])
     calls = []
 
-    def planner(state, actuators, segments):
+    def planner(state, actuators, segments, blind):
         calls.append(state[0])
         if len(calls) == 1:
             return first, True, "ok", None
