@@ -16,6 +16,7 @@ from controller.perception.detection import detect_segments
 from scenarios.sensors.lidar import (BACKDROP, FACE, GROUND, HULL, OBSTACLE, SPRAY, WATER,
                                      HullShape, LidarConfig, LidarMount, LidarNoise,
                                      LidarSimulator, default_mounts)
+from scenarios.sensors.perception_pipeline import DelayedLidarPerception
 from scenarios.world.canal import CanalWorld, Obstacle, Wall
 
 
@@ -569,6 +570,21 @@ def test_an_obstacle_removed_at_a_time_is_not_rendered_after_it():
 
     assert on_barge(None) > 100 and on_barge(9.9) > 100
     assert on_barge(10.0) == 0 and on_barge(60.0) == 0 and on_barge(5.0) > 100
+
+
+@pytest.mark.parametrize("parallel", [False, True])
+def test_lidar_perception_passes_the_time_so_a_removed_barge_leaves_the_scans(parallel):
+    barge = box(15, 17, -6.9, 6.9, 0, 1.2, kind="boat", name="barge", remove_at_s=1.0)
+    world = long_canal(14.0, obstacles=(barge,))
+    state = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+
+    def across(segs):  # a segment across the canal at the barge's near side
+        return ((np.abs(segs[:, 0] - 15.0) < 0.3)
+                & (np.abs(np.abs(segs[:, 2]) - math.pi / 2) < math.radians(3.0))).any()
+
+    with DelayedLidarPerception(world, seed=1, parallel=parallel) as p:
+        seen = [across(p.segments(t, state, state[:3])) for t in (0.0, 0.5, 1.0, 1.5)]
+    assert seen == [True, True, True, False]  # each scan is used one period later
 
 
 def test_extra_obstacles_are_rendered_for_one_scan():
