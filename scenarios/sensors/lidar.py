@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -353,6 +354,12 @@ class _Scene:
                             + [w.backdrop_height_m for w in world.walls], float),
                    np.zeros(2 * n))
 
+    @cached_property
+    def profile_key(self) -> np.ndarray:
+        """Per solid: a key that orders by top height, ties by index; its low bits hold
+        the solid's index + 1 (0 is the water)."""
+        return (_ordered(self.top) << _SOLID_BITS) + np.arange(1, len(self.kind) + 1)
+
     def with_obstacles(self, obstacles) -> "_Scene":
         """This scene and the obstacles (solids numbered after this scene's)."""
         a, b, owner, zb, zt, side = obstacle_edges(obstacles)
@@ -388,7 +395,8 @@ class LidarSimulator:
         self._keys = (beams.bin.astype(np.int64) << 32) + _ordered(beams.tan_el)
         self._n_bins = n_bins = int(sum(s.bins for s in self.sensors))
         self._bin_first = np.searchsorted(beams.bin, np.arange(n_bins + 1))  # beam range per bin
-        self._bin_key = np.arange(n_bins, dtype=np.int64) << 32
+        self._bin_index = np.arange(n_bins)
+        self._bin_key = self._bin_index.astype(np.int64) << 32
         # Each bin's lowest and highest beam key (an empty bin: nothing is inside its range).
         filled = self._bin_first[1:] > self._bin_first[:-1]
         self._bin_lo_key = np.where(filled, self._keys[np.minimum(self._bin_first[:-1],
@@ -596,9 +604,11 @@ class LidarSimulator:
         order = np.argsort(gbin * self._t_scale + t, kind="stable")  # (runs of bins: fast)
         gbin, t, owner, enter = gbin[order], t[order], owner[order], enter[order]
         n_ev = len(t)
-        first = np.searchsorted(gbin, np.arange(n_cols + 1))  # column c's crossings
+        count = np.bincount(gbin, minlength=n_cols)
+        first = np.zeros(n_cols + 1, np.intp)  # column c's crossings: first[c]:first[c + 1]
+        np.cumsum(count, out=first[1:])
         n_seg = n_ev + n_cols  # segment 0 of each column, then one after each crossing
-        seg_col = np.repeat(np.arange(n_cols), np.diff(first) + 1)
+        seg_col = np.repeat(self._bin_index, count + 1)
         seg0 = first[:-1] + np.arange(n_cols)  # each column's first segment
         ev_seg = np.arange(n_ev) + gbin + 1  # the segment each crossing starts
         kind = scene.kind[owner]
@@ -625,9 +635,8 @@ class LidarSimulator:
         stop = np.where(ent[use], nxt[use] + c + 1, p + c + 1)
         length = stop - start
         pair = np.repeat(start - np.cumsum(length) + length, length) + np.arange(int(length.sum()))
-        solid_key = (_ordered(scene.top) << _SOLID_BITS) + np.arange(1, len(scene.kind) + 1)
         key = np.zeros(n_seg, np.int64)  # 0: the water, height 0
-        np.maximum.at(key, pair, np.repeat(solid_key[owner[p]], length))
+        np.maximum.at(key, pair, np.repeat(scene.profile_key[owner[p]], length))
         top_of = (key & ((1 << _SOLID_BITS) - 1)) - 1
         solid = top_of >= 0
         height = np.where(solid, scene.top[top_of], 0.0)
@@ -663,18 +672,19 @@ class LidarSimulator:
                                         .ravel(), np.repeat(seg_col, 2)).reshape(-1, 2)
         q = 2 * np.arange(n_seg) + seg_col
         q_sky = 2 * (first[1:] + np.arange(n_cols)) + np.arange(n_cols) + 2
+        q1, q2 = q + 1, q + 2
         bound = np.empty(n_seg * 2 + n_cols, np.int64)
         bound[q[seg0]] = self._bin_first[:-1]
-        bound[q + 1] = found[:, 0]
-        bound[q + 2] = found[:, 1]
+        bound[q1] = found[:, 0]
+        bound[q2] = found[:, 1]
         runs = np.diff(bound, append=len(self._keys))
         f32 = np.float32
-        a = np.empty(len(bound), f32)
+        a = np.zeros(len(bound), f32)
         b = np.zeros(len(bound), f32)
         lab = np.empty(len(bound), np.int8)
         a[q], lab[q] = start_m, _FACE_LABEL[face_kind]
-        a[q + 1], b[q + 1], lab[q + 1] = 0.0, h - height, _TOP_LABEL[seg_kind]
-        a[q_sky], b[q_sky], lab[q_sky] = np.inf, 0.0, WATER
+        b[q1], lab[q1] = h - height, _TOP_LABEL[seg_kind]
+        a[q_sky], lab[q_sky] = np.inf, WATER
         t_all = np.repeat(a, runs)
         t_all += np.repeat(b, runs) * self._beams.inv_drop
         return t_all, np.repeat(lab, runs)
