@@ -414,7 +414,6 @@ class LidarSimulator:
         self._bin_count = counts
         self._bin_offset = np.concatenate([[0], np.cumsum(counts)[:-1]])
         self._bin_step = 2.0 * np.pi / counts
-        self._bin_sensor = np.repeat(np.arange(len(counts)), counts)
         local = np.arange(counts.sum()) - np.repeat(self._bin_offset, counts)
         self._bin_cos = np.cos(local * np.repeat(self._bin_step, counts))
         self._bin_sin = np.sin(local * np.repeat(self._bin_step, counts))
@@ -574,8 +573,9 @@ class LidarSimulator:
         """
         floating = scene.kind[owner] == _FLOATING
         if floating.any():
-            up = np.flatnonzero(~floating)
-            t_all, label = self._profile(scene, gbin[up], t[up], owner[up], enter[up])
+            ground = np.flatnonzero(~floating)
+            t_all, label = self._profile(scene, gbin[ground], t[ground], owner[ground],
+                                         enter[ground])
             fl = np.flatnonzero(floating)
             self._floating(scene, gbin[fl], t[fl], owner[fl], enter[fl], t_all, label)
             return t_all, label
