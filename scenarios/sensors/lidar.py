@@ -21,8 +21,8 @@ sensor under a deck starts inside one), the nearer hit winning. Beams blocked by
 boat's own hull and cabin return the hull (detection crops them). Range noise, dropouts,
 speckle off the water and spray in the wake are drawn from one seeded generator. No
 Python loop runs over beams, edges or columns: a scan is a few dozen array operations
-(~4-5 ms for the ~116k beams of the default suite on the 2-core development machine,
-`canalnav bench detection`). The cloud is float32 and comes as the (N, 3) view of a
+(~4-6 ms for the ~116k beams of the default suite on the shared 2-core development
+machine, `canalnav bench detection`). The cloud is float32 and comes as the (N, 3) view of a
 (3, N) buffer, so each coordinate is contiguous.
 
 A scan can be taken at a simulation time (obstacles removed by then are not rendered) and
@@ -462,7 +462,8 @@ class LidarSimulator:
 
         `time_s`: the simulation time; only the obstacles in the water then are rendered
         (None: all of them). `extra_obstacles`: more prisms for this scan only (outlines in
-        the inertial frame, e.g. other vessels at their pose now), rendered like the world's.
+        the inertial frame, e.g. other vessels at their pose now), rendered like the world's
+        and as given (their `remove_at_s` is not consulted).
         """
         return self.scan_labelled(pose, speed_mps, time_s, extra_obstacles).points
 
