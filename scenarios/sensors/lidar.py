@@ -4,34 +4,51 @@ A front 64-beam unit on the bow and port/starboard 32-beam units tilted down, 0.
 One call renders one 10 Hz scan of all three and returns one merged (N, 3) cloud in the
 body frame (x forward, y starboard, z down, origin at the boat's origin on the waterline).
 
-Speed comes from the world being vertical prisms (DESIGN.md, LiDAR): each sensor casts its
-azimuth columns once in 2-D against the wall, backdrop and obstacle outlines, and every beam
-of a column then finds its elevation's hit in closed form (water in front, the wall face,
-the quay top, the backdrop behind, an obstacle's face, top or underside). The beams are
-stored by column and elevation, so the beams of a column meeting one surface are one run:
-four binary searches per column classify them, and classes and distances are runs repeated
-from per-column tables. Beams blocked by the boat's own hull and cabin return the hull
-(detection crops them). Range noise, dropouts, speckle off the water and spray in the wake
-are drawn from one seeded generator. No Python loop runs over beams or edges: a scan is a
-few dozen array operations (~4-5 ms for the ~116k beams of the default suite on the 2-core
-development machine, `canalnav bench detection`). The cloud is float32 and comes as the
-(N, 3) view of a (3, N) buffer, so each coordinate is contiguous.
+Every beam returns the nearest surface at its own height along its azimuth, among all
+walls and obstacles: the water, wall faces and quay tops, the backdrops behind them (and
+what stands behind a low quay), piers and moored boats, and what floats above the water
+(bridge decks, quay overhangs: their faces, tops and undersides, with piers and boats
+below them). Speed comes from the world being vertical prisms (DESIGN.md, LiDAR): each
+sensor casts its azimuth columns once in 2-D against every outline, keeping every crossing
+and which way it goes (into a wall's land, an obstacle, or out of it). Along a column the
+land and the obstacles standing on the water make a height profile, whose first hit moves
+away as the elevation rises; so each visible piece of it (a face, a top, the water) is one
+interval of tan(elevation), and with the beams stored by column and elevation, one run of
+beams: one binary search over all columns' thresholds classifies every beam, and
+distances are runs of a + b / -tan(elevation) from per-piece tables. Floating prisms are
+then tested beam by beam in the columns they cover, each stretch inside a footprint (a
+sensor under a deck starts inside one), the nearer hit winning. Beams blocked by the
+boat's own hull and cabin return the hull (detection crops them). Range noise, dropouts,
+speckle off the water and spray in the wake are drawn from one seeded generator. No
+Python loop runs over beams, edges or columns: a scan is a few dozen array operations
+(~4-6 ms for the ~116k beams of the default suite on the shared 2-core development
+machine, `canalnav bench detection`). The cloud is float32 and comes as the (N, 3) view of a
+(3, N) buffer, so each coordinate is contiguous.
 
-Simplifications, on purpose: per column only the first wall and the land behind it are
-rendered (nothing beyond the backdrop), one obstacle per column (the nearest), and the boat
-does not roll or pitch.
+A scan can be taken at a simulation time (obstacles removed by then are not rendered) and
+with extra prisms for that scan only (other vessels where they are now).
+
+Simplifications, on purpose: the boat does not roll or pitch (the sensors' mounting tilt
+is kept); each beam takes the azimuth of its column (for the tilted units up to half a
+column off); surfaces are vertical prisms, so a sloped bank or a rounded hull is a step;
+every surface returns (no reflectivity, no mixed returns at edges, no beam divergence);
+behind the end of a wall the land is not defined: a ray that enters a wall's land keeps
+it past the wall's end, one that goes round the end meets the water, and a wall's face
+and a backdrop's front stand as thin surfaces where a ray meets them from behind; a ray
+that meets a polygon's vertex exactly passes it (the vertical line there is not hit).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
 from controller.errors import InputError
 
-from ..world.canal import CanalWorld
+from ..world.canal import CanalWorld, Obstacle, obstacle_edges
 
 # What each returned point hit (see LidarScan.labels).
 WATER, FACE, GROUND, BACKDROP, OBSTACLE, HULL, SPRAY = range(7)
@@ -181,6 +198,23 @@ def _cross(ax, ay, bx, by):
     return ax * by - ay * bx
 
 
+def _by_solid(group, t, enter, order):
+    """Crossings in `order` (by column and solid, then distance) less the pairs where a ray
+    only touches a solid: entering and leaving it at one point (a vertex met exactly,
+    whose two legs then come in either order). Returns that order and where each (column,
+    solid) group starts."""
+    g = group[order]
+    same = g[1:] == g[:-1]
+    touch = same & (enter[order[1:]] != enter[order[:-1]])
+    touch &= np.abs(t[order[1:]] - t[order[:-1]]) <= 1e-7
+    if touch.any():
+        keep = np.ones(len(g), bool)
+        keep[:-1] &= ~touch
+        keep[1:] &= ~touch
+        order, g = order[keep], g[keep]
+    return order, np.r_[True, g[1:] != g[:-1]]
+
+
 def _hull_range(origin, dirs, boxes) -> np.ndarray:
     """Slant range from `origin` along each direction to the first hull box (inf: clear).
     Coordinates (x, y, height up)."""
@@ -282,6 +316,66 @@ class _Beams:
         )
 
 
+# The renderer's kinds of solid along a column: a wall's land (its quay top), the backdrop
+# behind it, an obstacle standing on the water (a pier, a moored boat) and one floating
+# above it (a bridge deck, an overhang).
+_LAND, _BACK, _STANDING, _FLOATING = range(4)
+# The label of a face and of a top by kind; index 4 is no solid: the water.
+_FACE_LABEL = np.array([FACE, BACKDROP, OBSTACLE, OBSTACLE, WATER], np.int8)
+_TOP_LABEL = np.array([GROUND, BACKDROP, OBSTACLE, OBSTACLE, WATER], np.int8)
+_NEG_INF_KEY = int(_ordered(np.float32([-np.inf]))[0])
+_SOLID_BITS = 24  # a profile key: float32 height as ordered int << 24 | (solid + 1)
+
+
+@dataclass(frozen=True, eq=False)
+class _Scene:
+    """What one scan renders: every leg a -> b of every outline with the solid it bounds and
+    the side of the leg that solid lies on (+1 right, -1 left), and per solid its kind and
+    heights (top; bottom for obstacles, 0 otherwise)."""
+
+    a: np.ndarray
+    b: np.ndarray
+    owner: np.ndarray
+    side: np.ndarray
+    kind: np.ndarray
+    top: np.ndarray
+    bottom: np.ndarray
+
+    @classmethod
+    def of_walls(cls, world: CanalWorld) -> "_Scene":
+        """The walls' faces (solid w: the land of wall w) and backdrops (solid W + w)."""
+        fa, fb, _, fo, fside = world.edges["face"]
+        ba, bb, _, _, bo, bside = world.edges["backdrop"]
+        n = len(world.walls)
+        return cls(np.concatenate([fa, ba]), np.concatenate([fb, bb]),
+                   np.concatenate([fo, n + bo]).astype(np.intp), np.concatenate([fside, bside]),
+                   np.repeat(np.int8([_LAND, _BACK]), n),
+                   np.array([w.height_m for w in world.walls]
+                            + [w.backdrop_height_m for w in world.walls], float),
+                   np.zeros(2 * n))
+
+    @cached_property
+    def profile_key(self) -> np.ndarray:
+        """Per solid: a key that orders by top height, ties by index; its low bits hold
+        the solid's index + 1 (0 is the water)."""
+        return (_ordered(self.top) << _SOLID_BITS) + np.arange(1, len(self.kind) + 1)
+
+    def with_obstacles(self, obstacles) -> "_Scene":
+        """This scene and the obstacles (solids numbered after this scene's)."""
+        a, b, owner, zb, zt, side = obstacle_edges(obstacles)
+        kind = np.where(zb > 0.0, _FLOATING, _STANDING).astype(np.int8)
+        cat = np.concatenate
+        return _Scene(cat([self.a, a]), cat([self.b, b]), cat([self.owner, owner + len(self.kind)]),
+                      cat([self.side, side]), cat([self.kind, kind]), cat([self.top, zt]),
+                      cat([self.bottom, zb]))
+
+    def without(self, absent: np.ndarray) -> "_Scene":
+        """The scene without the edges of the solids marked `absent` (their tables stay)."""
+        keep = np.flatnonzero(~absent[self.owner])
+        return _Scene(self.a[keep], self.b[keep], self.owner[keep], self.side[keep], self.kind,
+                      self.top, self.bottom)
+
+
 class LidarSimulator:
     """Renders scans of a canal world from a boat pose; one seeded generator for all noise."""
 
@@ -299,26 +393,27 @@ class LidarSimulator:
         # bin * 2**32 + its float32 tan as an order-preserving integer (sorted, exact).
         beams = self._beams
         self._keys = (beams.bin.astype(np.int64) << 32) + _ordered(beams.tan_el)
-        n_bins = int(sum(s.bins for s in self.sensors))
+        self._n_bins = n_bins = int(sum(s.bins for s in self.sensors))
         self._bin_first = np.searchsorted(beams.bin, np.arange(n_bins + 1))  # beam range per bin
-        self._class_of_run = np.tile(np.arange(5, dtype=np.int8), n_bins)
+        self._bin_index = np.arange(n_bins)
+        self._bin_key = self._bin_index.astype(np.int64) << 32
+        # Each bin's lowest and highest beam key (an empty bin: nothing is inside its range).
+        filled = self._bin_first[1:] > self._bin_first[:-1]
+        self._bin_lo_key = np.where(filled, self._keys[np.minimum(self._bin_first[:-1],
+                                                                  len(self._keys) - 1)],
+                                    self._bin_key + (1 << 32) - 1)
+        self._bin_hi_key = np.where(filled, self._keys[self._bin_first[1:] - 1], 0)
         self.max_range_m = max(m.max_range_m for m in self.config.mounts)
-        e = world.edges
-        self._obst = e["obstacle"]
-        self._obstacles = world.obstacles
-        fa, fb, fh = e["face"]
-        ba, bb, bh, _ = e["backdrop"]
-        oa, ob, oo, _, _ = e["obstacle"]
-        self._edges = (  # a, b, category (0 face, 1 backdrop, 2 obstacle), height, obstacle
-            np.concatenate([fa, ba, oa]), np.concatenate([fb, bb, ob]),
-            np.concatenate([np.zeros(len(fa), int), np.ones(len(ba), int), np.full(len(oa), 2)]),
-            np.concatenate([fh, bh, np.zeros(len(oa))]),
-            np.concatenate([np.full(len(fa) + len(ba), -1), oo]).astype(int))
+        self._reach = self.max_range_m + 10.0
+        self._t_scale = 2.0 ** math.ceil(math.log2(self._reach + 1.0))  # sort key bin * scale + t
+        # The world's own scene, and the same without obstacles gone at some time (cached).
+        self._scene = _Scene.of_walls(world).with_obstacles(world.obstacles)
+        self._first_obstacle = 2 * len(world.walls)
+        self._scene_present: dict[bytes, _Scene] = {}
         counts = np.array([s.bins for s in self.sensors])
         self._bin_count = counts
         self._bin_offset = np.concatenate([[0], np.cumsum(counts)[:-1]])
         self._bin_step = 2.0 * np.pi / counts
-        self._bin_sensor = np.repeat(np.arange(len(counts)), counts)
         local = np.arange(counts.sum()) - np.repeat(self._bin_offset, counts)
         self._bin_cos = np.cos(local * np.repeat(self._bin_step, counts))
         self._bin_sin = np.sin(local * np.repeat(self._bin_step, counts))
@@ -359,23 +454,31 @@ class LidarSimulator:
                          & ~(hull < rng_))
         return out
 
-    def scan(self, pose, speed_mps: float = 0.0) -> np.ndarray:
+    def scan(self, pose, speed_mps: float = 0.0, time_s: float | None = None,
+             extra_obstacles=()) -> np.ndarray:
         """One merged scan at pose (x, y, psi): (N, 3) float32 (as LiDAR drivers deliver),
         body frame, z down, origin at the boat's origin on the waterline. (Column-major:
-        `np.ascontiguousarray` gives row-major points if a consumer needs them.)"""
-        return self.scan_labelled(pose, speed_mps).points
+        `np.ascontiguousarray` gives row-major points if a consumer needs them.)
 
-    def scan_labelled(self, pose, speed_mps: float = 0.0) -> LidarScan:
+        `time_s`: the simulation time; only the obstacles in the water then are rendered
+        (None: all of them). `extra_obstacles`: more prisms for this scan only (outlines in
+        the inertial frame, e.g. other vessels at their pose now), rendered like the world's
+        and as given (their `remove_at_s` is not consulted).
+        """
+        return self.scan_labelled(pose, speed_mps, time_s, extra_obstacles).points
+
+    def scan_labelled(self, pose, speed_mps: float = 0.0, time_s: float | None = None,
+                      extra_obstacles=()) -> LidarScan:
         """One merged scan with what each point hit (for tests, figures and benchmarks)."""
         pose = np.asarray(pose, float).reshape(-1)
         if pose.shape != (3,) or not np.all(np.isfinite(pose)):
             raise InputError(f"lidar: pose must be three finite numbers (x, y, psi), got {pose}")
-        psi = pose[2]
-        reach = self.max_range_m + 10.0
+        scene = self._scene_at(time_s, extra_obstacles)
         origins = self.sensor_positions(pose)
         spray = self._spray(speed_mps)
         n_spray = len(spray[1])
-        columns, labels, sensor = self._render(*self._cast(origins, psi, reach), n_spray=n_spray)
+        t_all, label = self._distances(scene, *self._cast(scene, origins, pose[2]))
+        columns, labels, sensor = self._render(t_all, label, n_spray=n_spray)
         if n_spray:
             columns[:, -n_spray:] = spray[0].T
         # (N, 3) view of the (3, N) buffer: no copy, and each coordinate is contiguous.
@@ -383,23 +486,48 @@ class LidarSimulator:
                          np.concatenate([sensor, spray[2]]))
 
     # -- rendering ----------------------------------------------------------------------
-    def _cast(self, origins, psi, reach):
-        """The 2-D cast of every azimuth bin of every sensor (bins numbered across sensors).
+    def _scene_at(self, time_s, extra_obstacles) -> _Scene:
+        """The world's scene at `time_s` (obstacles removed by then left out), plus extras."""
+        scene = self._scene
+        if time_s is not None:
+            if isinstance(time_s, bool) or not isinstance(time_s, (int, float, np.number)) \
+                    or not math.isfinite(time_s):
+                raise InputError(f"lidar: time_s must be a finite number of seconds or None, "
+                                 f"got {time_s!r}")
+            if self.world.changes:
+                present = self.world.obstacles_present(float(time_s))
+                key = present.tobytes()
+                if key not in self._scene_present:
+                    absent = np.zeros(len(scene.kind), bool)
+                    absent[self._first_obstacle:] = ~present
+                    self._scene_present[key] = scene.without(absent)
+                scene = self._scene_present[key]
+        extra = tuple(extra_obstacles)
+        if extra:
+            bad = [o for o in extra if not isinstance(o, Obstacle)]
+            if bad:
+                raise InputError(f"lidar: extra_obstacles must be Obstacle objects, got "
+                                 f"{type(bad[0]).__name__}")
+            scene = scene.with_obstacles(extra)
+        return scene
 
-        Returns per bin: distance to the nearest wall face and its height, to the backdrop
-        behind it and its height, and to the nearest obstacle's entry and exit with that
-        obstacle's index (-1: none). Each edge is paired only with the bins inside its
-        angular span as a sensor sees it, so the work grows with bins times surfaces crossed,
-        not bins times all edges.
+    def _cast(self, scene: _Scene, origins, psi):
+        """The 2-D cast of every azimuth bin of every sensor (bins numbered across sensors):
+        every crossing of a bin's ray with an edge within reach, as (bin, horizontal
+        distance, solid, whether the ray enters the solid there).
+
+        Each edge is paired only with the bins inside its angular span as a sensor sees it,
+        so the work grows with bins times surfaces crossed, not bins times all edges. Which
+        way a ray crosses is the sign of its cross product with the edge, against the side
+        the solid lies on.
         """
-        a, b, cat, value, owner = self._edges
+        a, b = scene.a, scene.b
+        reach = self._reach
         centre = origins.mean(axis=0)
         near = np.minimum(np.hypot(*(a - centre).T), np.hypot(*(b - centre).T))
         keep = np.flatnonzero(near < reach + np.hypot(*(b - a).T))
-        n_total = self._bin_offset[-1] + self.sensors[-1].bins
-        none = np.full(n_total, np.inf)
         if not len(keep):
-            return none, np.zeros(n_total), none, np.zeros(n_total), none, none, np.full(n_total, -1)
+            return np.zeros(0, np.intp), np.zeros(0), np.zeros(0, np.intp), np.zeros(0, bool)
         # One row per (sensor, edge).
         n_s, n_e = len(origins), len(keep)
         edge = np.tile(keep, n_s)
@@ -411,8 +539,12 @@ class LidarSimulator:
         ang_b = np.arctan2(eb[:, 1] - o[:, 1], eb[:, 0] - o[:, 0]) - psi
         span = (ang_b - ang_a + np.pi) % (2 * np.pi) - np.pi
         lo = np.where(span < 0, ang_b, ang_a)
+        hi = np.where(span < 0, ang_a, ang_b)
+        # Bins from each end's own angle (and whole turns), so two legs meeting at a vertex
+        # agree on whether a bin's ray passes there (both take it, or neither).
         k0 = np.ceil(lo / step).astype(np.int64)
-        k1 = np.floor((lo + np.abs(span)) / step).astype(np.int64)
+        turns = np.rint((lo + np.abs(span) - hi) / (2 * np.pi)).astype(np.int64)
+        k1 = np.floor(hi / step).astype(np.int64) + turns * self._bin_count[sensor]
         count = np.maximum(k1 - k0 + 1, 0)
         row = np.repeat(np.arange(len(edge)), count)
         k = np.repeat(k0 - (np.cumsum(count) - count), count) + np.arange(int(count.sum()))
@@ -423,77 +555,218 @@ class LidarSimulator:
         cp, sp = math.cos(psi), math.sin(psi)
         d = eb - ea
         ex, ey = d[row, 0], d[row, 1]
+        den = _cross(cp * cb - sp * sb, sp * cb + cp * sb, ex, ey)
         with np.errstate(divide="ignore", invalid="ignore"):
-            t = _cross(ea[row, 0] - o[row, 0], ea[row, 1] - o[row, 1], ex, ey) / _cross(
-                cp * cb - sp * sb, sp * cb + cp * sb, ex, ey)
-        ok = np.flatnonzero(np.isfinite(t) & (t > 1e-6))
-        row, t, gbin = row[ok], t[ok], gbin[ok]
-        e = edge[row]
-        c = cat[e]
+            t = _cross(ea[row, 0] - o[row, 0], ea[row, 1] - o[row, 1], ex, ey) / den
+        ok = np.flatnonzero((t > 1e-6) & (t <= reach))  # (inf and nan fail both)
+        gbin, t, den, e = gbin[ok], t[ok], den[ok], edge[row[ok]]
+        # The solid lies on side +1 (right of a -> b) or -1: the ray enters it where the
+        # ray's cross product with the edge (den) has the opposite sign.
+        return gbin, t, scene.owner[e], scene.side[e] * den < 0.0
 
-        def nearest(mask, floor=None):
-            gb, tt, ee = gbin[mask], t[mask], e[mask]
-            if floor is not None:
-                beyond = tt > floor[gb] + 1e-6
-                gb, tt, ee = gb[beyond], tt[beyond], ee[beyond]
-            best = np.full(n_total, np.inf)
-            np.minimum.at(best, gb, tt)
-            which = np.full(n_total, -1)
-            hit = tt == best[gb]
-            which[gb[hit]] = ee[hit]
-            return best, which
+    def _distances(self, scene: _Scene, gbin, t, owner, enter):
+        """Every world-facing beam's horizontal distance to the first surface it meets
+        (inf: none) and that surface's label, from the crossings of `_cast`.
 
-        t_face, e_face = nearest(c == 0)
-        wall_h = np.where(e_face >= 0, value[e_face], 0.0)
-        t_back, e_back = nearest(c == 1, floor=t_face)
-        back_h = np.where(e_back >= 0, value[e_back], 0.0)
-        t_in, e_in = nearest(c == 2)
-        obst = np.where(e_in >= 0, owner[e_in], -1)
-        t_out, _ = nearest((c == 2) & (owner[e] == obst[gbin]), floor=t_in)
-        if self._obstacles:
-            inside = np.array([ob.contains(origins) for ob in self._obstacles])  # (O, S)
-            in_bin = (obst >= 0) & inside[np.maximum(obst, 0), self._bin_sensor]
-            t_in, t_out = np.where(in_bin, 0.0, t_in), np.where(in_bin, t_in, t_out)
-        return t_face, wall_h, t_back, back_h, t_in, t_out, obst
-
-    def _render(self, t_face, wall_h, t_back, back_h, t_in, t_out, owner, n_spray=0):
-        """Every beam of every sensor at once: which surface its elevation meets first.
-
-        Along one column the surfaces are met in a fixed order of elevation: water below
-        the wall's foot, the wall face up to its top, the quay top behind it (if the sensor
-        is above it), the backdrop, then sky. So per column four thresholds on tan(elevation)
-        classify all its beams; as the beams are stored by column and elevation, each class
-        is one run of beams per column, found by binary search, and the classes and
-        distances of all beams are runs repeated from per-column tables (no per-beam
-        gathers). The horizontal distance of every class is a + b / -tan(elevation).
+        Along a column the walls' land, the backdrops and the obstacles standing on the
+        water make a height profile (`_profile`); what floats above the water is then
+        tested beam by beam in the columns it covers (`_floating`), the nearer hit winning.
         """
+        floating = scene.kind[owner] == _FLOATING
+        if floating.any():
+            ground = np.flatnonzero(~floating)
+            t_all, label = self._profile(scene, gbin[ground], t[ground], owner[ground],
+                                         enter[ground])
+            fl = np.flatnonzero(floating)
+            self._floating(scene, gbin[fl], t[fl], owner[fl], enter[fl], t_all, label)
+            return t_all, label
+        return self._profile(scene, gbin, t, owner, enter)
+
+    def _profile(self, scene: _Scene, gbin, t, owner, enter):
+        """First hits against the height profile of every column, for all beams at once.
+
+        The crossings of a column, sorted by distance, cut it into segments; on each the
+        profile's height is the highest solid there (water: 0). A solid is there after a
+        crossing that enters it until its next crossing; an obstacle is there from the
+        sensor on if the column's first crossing of it leaves it (the sensor is inside).
+        Wall faces and backdrop fronts also stand where a ray meets them from the land
+        side (a wall's back, seen past the end of a bank).
+
+        For a profile the first hit moves away as the elevation rises (a higher beam passes
+        over where a lower one hit), so with C_i the least tan(elevation) that clears
+        segments 0..i-1 and F_i the tan to the top of segment i's face, a beam of segment
+        i's column meets that face for tan in (C_i, F_i] and its top in (max(C_i, F_i),
+        C_i+1]; above the last C: sky. As beams are stored by column and elevation, every
+        piece is one run of beams, found by one binary search of all (bin, tan) keys, and
+        its distance is a + b / -tan(elevation): the face's distance, or (h - height) for a
+        top. No Python loop runs over beams, crossings or columns.
+        """
+        n_cols = self._n_bins
+        order = np.argsort(gbin * self._t_scale + t, kind="stable")  # (runs of bins: fast)
+        gbin, t, owner, enter = gbin[order], t[order], owner[order], enter[order]
+        n_ev = len(t)
+        count = np.bincount(gbin, minlength=n_cols)
+        first = np.zeros(n_cols + 1, np.intp)  # column c's crossings: first[c]:first[c + 1]
+        np.cumsum(count, out=first[1:])
+        n_seg = n_ev + n_cols  # segment 0 of each column, then one after each crossing
+        seg_col = np.repeat(self._bin_index, count + 1)
+        seg0 = first[:-1] + np.arange(n_cols)  # each column's first segment
+        ev_seg = np.arange(n_ev) + gbin + 1  # the segment each crossing starts
+        kind = scene.kind[owner]
+
+        # Which solid is highest on each segment: each solid's stretches are segment ranges,
+        # expanded into (segment, solid) pairs and reduced by a maximum of keys that order
+        # by height (ties: the later solid).
+        group = gbin * len(scene.kind) + owner
+        # (Stable: distance order within a group. 16-bit keys sort by radix, several times
+        # faster.)
+        by_solid, new = _by_solid(group, t, enter, np.argsort(
+            group.astype(np.uint16) if n_cols * len(scene.kind) <= 1 << 16 else group,
+            kind="stable"))
+        nxt = np.empty(len(by_solid), np.intp)
+        nxt[:-1] = by_solid[1:]
+        col = gbin[by_solid]
+        last = np.r_[new[1:], True]
+        nxt = np.where(last, first[col + 1], nxt)  # the solid's next crossing, or column end
+        ent = enter[by_solid]
+        inside = new & ~ent & (kind[by_solid] == _STANDING)
+        use = np.flatnonzero(ent | inside)
+        p, c = by_solid[use], col[use]
+        start = np.where(ent[use], p + c + 1, seg0[c])
+        stop = np.where(ent[use], nxt[use] + c + 1, p + c + 1)
+        length = stop - start
+        pair = np.repeat(start - np.cumsum(length) + length, length) + np.arange(int(length.sum()))
+        key = np.zeros(n_seg, np.int64)  # 0: the water, height 0
+        np.maximum.at(key, pair, np.repeat(scene.profile_key[owner[p]], length))
+        top_of = (key & ((1 << _SOLID_BITS) - 1)) - 1
+        solid = top_of >= 0
+        height = np.where(solid, scene.top[top_of], 0.0)
+        seg_kind = np.where(solid, scene.kind[top_of], 4)
+        # Wall faces and backdrop fronts stand at every crossing, from either side.
+        fin = np.zeros(n_seg)
+        fin_kind = np.full(n_seg, 4)
+        wallish = np.flatnonzero(kind <= _BACK)
+        fin[ev_seg[wallish]] = scene.top[owner[wallish]]
+        fin_kind[ev_seg[wallish]] = kind[wallish]
+        face_height = np.maximum(height, fin)
+        face_kind = np.where(fin > height, fin_kind, seg_kind)
+
+        start_m = np.zeros(n_seg)
+        start_m[ev_seg] = t
+        end_m = np.full(n_seg, np.inf)
+        end_m[ev_seg - 1] = t
+        h = self._bin_height[seg_col]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            f = (face_height - h) / start_m  # +-inf at a column's start
+            clear = np.where(height < h, (height - h) / end_m, (height - h) / start_m)
+        f[np.isnan(f)] = -np.inf
+        clear[np.isnan(clear)] = np.inf
+        colkey = self._bin_key[seg_col]
+        key_f = colkey + _ordered(f)
+        c_next = np.maximum.accumulate(np.maximum(key_f, colkey + _ordered(clear)))
+        c_here = np.empty(n_seg, np.int64)
+        c_here[1:] = c_next[:-1]
+        c_here[seg0] = self._bin_key + _NEG_INF_KEY
+        # Per column the pieces face_0, top_0, face_1, ..., top_last, sky start at the beams
+        # past C_0, F_0', C_1, ..., F_last', C_end (F' = max(C, F)).
+        found = self._beams_at_or_below(np.column_stack([np.maximum(c_here, key_f), c_next])
+                                        .ravel(), np.repeat(seg_col, 2)).reshape(-1, 2)
+        q = 2 * np.arange(n_seg) + seg_col
+        q_sky = 2 * (first[1:] + np.arange(n_cols)) + np.arange(n_cols) + 2
+        q1, q2 = q + 1, q + 2
+        bound = np.empty(n_seg * 2 + n_cols, np.int64)
+        bound[q[seg0]] = self._bin_first[:-1]
+        bound[q1] = found[:, 0]
+        bound[q2] = found[:, 1]
+        runs = np.diff(bound, append=len(self._keys))
+        f32 = np.float32
+        a = np.zeros(len(bound), f32)
+        b = np.zeros(len(bound), f32)
+        lab = np.empty(len(bound), np.int8)
+        a[q], lab[q] = start_m, _FACE_LABEL[face_kind]
+        b[q1], lab[q1] = h - height, _TOP_LABEL[seg_kind]
+        a[q_sky], lab[q_sky] = np.inf, WATER
+        t_all = np.repeat(a, runs)
+        t_all += np.repeat(b, runs) * self._beams.inv_drop
+        return t_all, np.repeat(lab, runs)
+
+    def _beams_at_or_below(self, key, col):
+        """For sorted (bin, tan) keys, each in the bin `col`: how many beams have a key at
+        or below it (`searchsorted` right). Keys outside their bin's range of beams and
+        repeated keys, most of them, are answered without a search."""
+        above = key >= self._bin_lo_key[col]
+        out = self._bin_first[col + above]
+        inside = np.flatnonzero(above & (key < self._bin_hi_key[col]))
+        if len(inside):
+            v = key[inside]
+            new = np.empty(len(v), bool)
+            new[0] = True
+            np.not_equal(v[1:], v[:-1], out=new[1:])
+            out[inside] = np.searchsorted(self._keys, v[new], "right")[np.cumsum(new) - 1]
+        return out
+
+    def _floating(self, scene: _Scene, gbin, t, owner, enter, t_all, label) -> None:
+        """Solids above the water (bridge decks, overhangs): where a beam meets one (face,
+        top or underside) before its profile hit, set its distance and label. Each stretch
+        of a column inside a footprint (a concave outline gives several; a sensor under
+        it starts inside) is tested against the beams of that column only."""
+        order, new = _by_solid(gbin * len(scene.kind) + owner, t, enter,
+                               np.lexsort((t, owner, gbin)))
+        gbin, t, owner, enter = gbin[order], t[order], owner[order], enter[order]
+        t_next = np.r_[t[1:], np.inf]
+        t_next[np.r_[new[1:], True]] = np.inf
+        lead = np.flatnonzero(new & ~enter)  # first crossing leaves: inside from the sensor on
+        ent = np.flatnonzero(enter)
+        cols = np.concatenate([gbin[ent], gbin[lead]])
+        t_in = np.concatenate([t[ent], np.zeros(len(lead))])
+        t_out = np.concatenate([t_next[ent], t[lead]])
+        who = np.concatenate([owner[ent], owner[lead]])
+        by_col = np.argsort(cols, kind="stable")
+        cols, t_in, t_out, who = cols[by_col], t_in[by_col], t_out[by_col], who[by_col]
+        # A column crossing several footprints: one layer of stretches at a time, so each
+        # beam is written at most once per layer and the nearest hit wins.
+        layer = np.arange(len(cols)) - np.searchsorted(cols, cols)
+        beams = self._beams
+        first = self._bin_first
+        f32 = np.float32
+        for k in range(int(layer.max()) + 1 if len(layer) else 0):
+            sel = np.flatnonzero(layer == k)
+            cb = cols[sel]
+            runs = first[cb + 1] - first[cb]
+            idx = np.repeat(first[cb] - np.cumsum(runs) + runs, runs) + np.arange(int(runs.sum()))
+            rep = np.repeat(sel, runs)
+            tan = beams.tan_el[idx]
+            h = beams.height[idx]
+            tin, tout = t_in.astype(f32)[rep], t_out.astype(f32)[rep]
+            zlo, zhi = scene.bottom.astype(f32)[who[rep]], scene.top.astype(f32)[who[rep]]
+            zi = h + tin * tan
+            inv = beams.inv_drop[idx]  # 1 / -tan going down, 0 going up
+            t_top = np.where(inv > 0, (h - zhi) * inv, np.inf)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t_under = np.where(tan > 0, (zlo - h) / tan, np.inf)
+            hit = np.where((tin > 0) & (zi >= zlo) & (zi <= zhi), tin, np.inf)
+            hit = np.where((zi > zhi) & (t_top > tin) & (t_top < tout), t_top, hit)
+            hit = np.where((zi < zlo) & (t_under > tin) & (t_under < tout), t_under, hit)
+            nearer = np.flatnonzero(hit < t_all[idx])  # sky is at infinity
+            t_all[idx[nearer]] = hit[nearer]
+            label[idx[nearer]] = OBSTACLE
+
+    def _render(self, t_all, label, n_spray=0):
+        """The scan from every beam's first-hit distance and label: beams within range,
+        dropouts and speckle off the water, range noise, the points, the own hull's returns
+        (with room for the spray after them)."""
         beams = self._beams
         noise = self.config.noise
         rng = self.rng
         f32 = np.float32
-        h = self._bin_height
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t1 = -h / t_face  # wall foot
-            t2 = np.maximum(t1, (wall_h - h) / t_face)  # wall top
-            t3 = np.maximum(t2, np.where(h > wall_h, -(h - wall_h) / t_back, -np.inf))
-            t4 = np.maximum(t3, (back_h - h) / t_back)  # backdrop top
-        # cls: 0 water, 1 face, 2 quay top, 3 backdrop, 4 sky (LABELS below), 5 obstacle.
-        cls, runs = self._classes(t1, t2, t3, t4)
-        zero = np.zeros(len(h))
-        a = np.column_stack([zero, t_face, zero, t_back, np.full(len(h), np.inf)])
-        b = np.column_stack([h, zero, h - wall_h, zero, zero])
-        t_all = np.repeat(a.astype(f32).ravel(), runs)
-        t_all += np.repeat(b.astype(f32).ravel(), runs) * beams.inv_drop
-        self._render_obstacles(t_in, t_out, owner, cls, t_all)
-
         # Beams within range (sky is infinitely far), then dropouts and speckle.
         returns = t_all >= beams.min_h
         returns &= t_all <= beams.max_h
         idx = np.flatnonzero(returns)
-        lab = cls[idx]
+        lab = label[idx]
         u = self._uniform16(len(idx))
         drop, speckle = _level16(noise.dropout), _level16(noise.dropout + noise.water_speckle)
-        keep = (u >= drop) & ((lab != 0) | (u < speckle))
+        keep = (u >= drop) & ((lab != WATER) | (u < speckle))
         # (Indexing through flatnonzero is several times faster than with a boolean mask.)
         keep = np.flatnonzero(keep)
         idx, lab = idx[keep], lab[keep]
@@ -512,8 +785,7 @@ class LidarSimulator:
         cuts = np.searchsorted(idx, self._beam_start)
         for k, (lo, hi) in enumerate(zip(cuts, np.r_[cuts[1:], n])):
             pts[:, lo:hi] += self.sensors[k].origin_body[:, None]
-        label = np.where(lab == 5, np.int8(OBSTACLE), lab)  # classes 0-3 are the labels
-        water = np.flatnonzero(label == WATER)
+        water = np.flatnonzero(lab == WATER)
         if len(water):
             pts[2, water] -= rng.uniform(-1.0, 1.0, len(water)).astype(f32) * f32(
                 noise.water_ripple_m)
@@ -524,56 +796,8 @@ class LidarSimulator:
         hull += beams.hull_unit.take(hull_keep, axis=1) * (
             self._normal(m) * f32(noise.range_sigma_m))
         return (out,
-                np.concatenate([label, np.full(m, HULL, np.int8)]),
+                np.concatenate([lab, np.full(m, HULL, np.int8)]),
                 np.concatenate([beams.sensor[idx], beams.hull_sensor[hull_keep]]))
-
-    def _classes(self, t1, t2, t3, t4):
-        """Class of every beam, 0-4: how many of tan >= t1, tan > t2, tan >= t3, tan > t4
-        hold for its tan(elevation) and its bin's thresholds (float32 comparisons), and the
-        (bins * 5) run lengths of the classes (beams are sorted by bin, then tan).
-
-        In each bin the beams meeting one condition are a tail of the bin's run; where it
-        starts is a binary search of the (bin, tan) keys, exact as the keys are integers."""
-        base = np.arange(len(t1), dtype=np.int64) << 32
-        bounds = np.empty((len(t1), 6), np.int64)
-        bounds[:, 0], bounds[:, 5] = self._bin_first[:-1], self._bin_first[1:]
-        for q, (t, side) in enumerate(((t1, "left"), (t2, "right"), (t3, "left"),
-                                       (t4, "right"))):
-            key = base + _ordered(np.asarray(t).astype(np.float32))
-            bounds[:, q + 1] = np.searchsorted(self._keys, key, side)
-        bounds[:, 1:5].sort(axis=1)  # a count of conditions, whatever their order
-        runs = np.diff(bounds, axis=1).ravel()
-        return np.repeat(self._class_of_run, runs), runs
-
-    def _render_obstacles(self, t_in, t_out, owner, cls, t_all):
-        """Where a beam meets an obstacle (face, top or underside) before its surface, mark
-        it (class 5) and set its distance in `t_all`; only beams of columns that cross one."""
-        beams = self._beams
-        cols = np.flatnonzero(owner >= 0)
-        if not len(cols):
-            return
-        first = self._bin_first
-        runs = first[cols + 1] - first[cols]
-        # The beams of those columns (contiguous per column), without a per-beam search.
-        idx = np.repeat(first[cols] - np.cumsum(runs) + runs, runs) + np.arange(int(runs.sum()))
-        _, _, _, zb_all, zt_all = self._obst
-        f32 = np.float32
-        b = beams.bin[idx]
-        tan = beams.tan_el[idx]
-        h = beams.height[idx]
-        tin, tout = t_in.astype(f32)[b], t_out.astype(f32)[b]
-        zlo, zhi = zb_all.astype(f32)[owner[b]], zt_all.astype(f32)[owner[b]]
-        zi = h + tin * tan
-        inv = beams.inv_drop[idx]  # 1 / -tan going down, 0 going up
-        t_top = np.where(inv > 0, (h - zhi) * inv, np.inf)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t_under = np.where(tan > 0, (zlo - h) / tan, np.inf)
-        t = np.where((tin > 0) & (zi >= zlo) & (zi <= zhi), tin, np.inf)
-        t = np.where((zi > zhi) & (t_top > tin) & (t_top < tout), t_top, t)
-        t = np.where((zi < zlo) & (t_under > tin) & (t_under < tout), t_under, t)
-        nearer = t < t_all[idx]  # sky is at infinity
-        t_all[idx[nearer]] = t[nearer]
-        cls[idx[nearer]] = 5
 
     def _uniform16(self, n: int) -> np.ndarray:
         """n uniform 16-bit draws (compare with `_level16`): cheaper than float draws, and

@@ -39,8 +39,9 @@ class KnownWalls:
 
 
 class LidarPerception:
-    """The simulated three-LiDAR scan at the true pose, detected into segments placed with the
-    estimated pose (so navigation errors move the segments, as on the real boat)."""
+    """The simulated three-LiDAR scan at the true pose and time (obstacles removed by then are
+    gone), detected into segments placed with the estimated pose (so navigation errors move
+    the segments, as on the real boat)."""
 
     name = "lidar"
 
@@ -58,7 +59,8 @@ class LidarPerception:
 
         true_state = np.asarray(true_state, float)
         t0 = time.perf_counter()
-        points = self.simulator.scan(true_state[:3], speed_mps=float(true_state[3]))
+        points = self.simulator.scan(true_state[:3], speed_mps=float(true_state[3]),
+                                     time_s=None if time_s is None else float(time_s))
         t1 = time.perf_counter()
         self.points_per_scan.append(len(points))
         if not len(points):

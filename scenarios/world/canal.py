@@ -444,7 +444,9 @@ class CanalWorld:
 
     # -- tables for renderers -----------------------------------------------------------
     def _edge_tables(self) -> dict:
-        """Flat edge arrays for the LiDAR simulator: faces, backdrops, obstacles."""
+        """Flat edge arrays for the LiDAR simulator: faces, backdrops, obstacles. Each leg
+        also says which wall or obstacle it belongs to and on which side of a -> b the solid
+        lies (side +1: to the right, starboard of the leg's direction; -1: to the left)."""
         def legs(lines):
             if not lines:
                 return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, int)
@@ -456,15 +458,30 @@ class CanalWorld:
         backdrops = [(i, w.backdrop) for i, w in enumerate(self.walls) if w.backdrop is not None]
         ba, bb, bo = legs([p for _, p in backdrops])
         bo = np.array([backdrops[k][0] for k in bo], int) if len(bo) else bo
-        oa, ob, oo = legs([o.closed for o in self.obstacles])
+        land = np.array([w.land_sign for w in self.walls])
         return {
-            "face": (fa, fb, np.array([self.walls[k].height_m for k in fo])),
+            "face": (fa, fb, np.array([self.walls[k].height_m for k in fo]), fo, land[fo]),
             "backdrop": (ba, bb, np.array([self.walls[k].backdrop_height_m for k in bo]),
-                         np.array([self.walls[k].height_m for k in bo])),
-            "obstacle": (oa, ob, oo,
-                         np.array([o.z_bottom_m for o in self.obstacles]),
-                         np.array([o.z_top_m for o in self.obstacles])),
+                         np.array([self.walls[k].height_m for k in bo]), bo, land[bo]),
+            "obstacle": obstacle_edges(self.obstacles),
         }
+
+
+def obstacle_edges(obstacles) -> tuple:
+    """Flat edge arrays of obstacle outlines for renderers: (a, b, owner, z_bottom_m,
+    z_top_m, side): legs a -> b (M, 2), the index into `obstacles` of each leg's owner (M,),
+    the obstacles' heights (O,) and on which side of each leg the inside lies (M,), +1 to
+    the right (starboard of a -> b), -1 to the left."""
+    obstacles = tuple(obstacles)
+    zb = np.array([o.z_bottom_m for o in obstacles], float)
+    zt = np.array([o.z_top_m for o in obstacles], float)
+    if not obstacles:
+        return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, int), zb, zt, np.zeros(0)
+    a, b = polyline_legs([o.closed for o in obstacles])
+    counts = [len(o.outline) for o in obstacles]
+    owner = np.repeat(np.arange(len(obstacles)), counts)
+    side = np.repeat([1.0 if polygon_area(o.outline) > 0 else -1.0 for o in obstacles], counts)
+    return a, b, owner, zb, zt, side
 
 
 def walls_crossing(walls) -> tuple[int, int, int, int] | None:
