@@ -217,7 +217,7 @@ class ObstacleWatch:
                 for k, o in enumerate(self.obstacles)]
 
 
-def waiting_episodes(waiting, speed_mps, dt: float, at_rest_mps: float = 0.1) -> dict:
+def waiting_episodes(waiting, speed_mps, dt: float, at_rest_mps: float = 0.05) -> dict:
     """How long the controller waited (a stop made for a blocked way or blindness), how long
     of that the boat was held at rest (from the first step below `at_rest_mps` in each
     episode to its end), and the highest speed while held."""
@@ -236,3 +236,27 @@ def waiting_episodes(waiting, speed_mps, dt: float, at_rest_mps: float = 0.1) ->
         "time_held_s": float(np.count_nonzero(held) * dt),
         "max_speed_while_held_mps": float(speed[held].max()) if held.any() else None,
     }
+
+
+def water_estimate(rows: np.ndarray, target_speed_mps: float, within_mps: float = 0.05,
+                   steady_mps: float = 0.1) -> dict:
+    """How well the current was estimated. `rows`: per step (time, true N, true E, estimated
+    N, estimated E, surge speed). Steady running starts when the boat first comes within
+    `steady_mps` of the target speed; reported: when the estimate first came within
+    `within_mps` of the truth after that (and how long after), and its error from then on."""
+    t, true, est, u = rows[:, 0], rows[:, 1:3], rows[:, 3:5], rows[:, 5]
+    error = np.hypot(*(est - true).T)
+    steady = np.flatnonzero(np.abs(u - target_speed_mps) <= steady_mps)
+    out = {"steady_from_s": float(t[steady[0]]) if len(steady) else None,
+           "within_mps": within_mps, "within_at_s": None, "within_after_steady_s": None,
+           "mean_error_after_mps": None, "max_error_after_mps": None,
+           "final_error_mps": float(error[-1])}
+    if not len(steady):
+        return out
+    close = np.flatnonzero((error <= within_mps) & (t >= t[steady[0]]))
+    if len(close):
+        k = close[0]
+        out.update(within_at_s=float(t[k]), within_after_steady_s=float(t[k] - t[steady[0]]),
+                   mean_error_after_mps=float(error[k:].mean()),
+                   max_error_after_mps=float(error[k:].max()))
+    return out
