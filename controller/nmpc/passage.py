@@ -17,9 +17,10 @@ Reachability from slab to slab lets the boat weave between staggered obstacles; 
 missing from the scan only ever makes the way look more open, so detection gaps never stop
 the boat, they leave it to the NMPC as before.
 
-`WayAhead` adds the time: blocked at once, clear again only after `resume_after_s` of clear
-sweeps (a missed scan does not restart the boat), and blind (no usable scans) is a stop too,
-at the braking distance from where the boat was when it went blind.
+`WayAhead` adds the time: a sweep every `sweep_every_s` (0.5 s, a metre at 2 m/s), blocked at
+once, clear again only after `resume_after_s` of clear sweeps (a missed scan does not
+restart the boat), and blind (no usable scans) is a stop too, at the braking distance from
+where the boat was when it went blind.
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ class Stop:
 
 def blocked_at(path: WaypointPath, progress_m: float, offset_m: float, segments,
                min_passage_m: float, lookahead_m: float, lateral_m: float = 30.0,
-               slab_m: float = 1.0, spacing_m: float = 0.25) -> float | None:
+               slab_m: float = 1.0, spacing_m: float = 0.5) -> float | None:
     """Arc length of the first slab ahead of `progress_m` (within `lookahead_m`) where the
     segments leave no passage at least `min_passage_m` wide that connects back to the boat
     (at `offset_m` across the path), or None when the way is open."""
@@ -110,17 +111,19 @@ class WayAhead:
     """Blocked, blind or open, step by step, with the hysteresis a noisy scan needs."""
 
     def __init__(self, min_passage_m: float, stop_short_m: float, decel_mps2: float,
-                 resume_after_s: float):
+                 resume_after_s: float, sweep_every_s: float = 0.5):
         self.min_passage_m = min_passage_m
         self.stop_short_m = stop_short_m  # from the obstruction to the boat's origin
         self.decel_mps2 = decel_mps2
         self.resume_after_s = resume_after_s
+        self.sweep_every_s = sweep_every_s  # the sweep costs ~0.5 ms: twice a second will do
         self.reset()
 
     def reset(self) -> None:
         self._stop: Stop | None = None
         self._clear_s = 0.0
         self._blind_stop_m: float | None = None
+        self._since_sweep = None  # s since the last sweep (None: sweep now)
 
     def update(self, path: WaypointPath, progress_m: float, offset_m: float, speed_mps: float,
                segments, blind: bool, period_s: float, lookahead_m: float) -> Stop | None:
@@ -131,13 +134,18 @@ class WayAhead:
             self._stop, self._clear_s = Stop(self._blind_stop_m, "blind: no usable scan"), 0.0
             return self._stop
         self._blind_stop_m = None
+        if self._since_sweep is not None:
+            self._since_sweep += period_s
+            if self._since_sweep < self.sweep_every_s - 1e-9:
+                return self._stop  # as at the last sweep (1 m at 2 m/s)
+        elapsed, self._since_sweep = self._since_sweep or 0.0, 0.0
         at = blocked_at(path, progress_m, offset_m, segments, self.min_passage_m, lookahead_m)
         if at is not None:
             self._clear_s = 0.0
             self._stop = Stop(at - self.stop_short_m, f"way blocked at {at - progress_m:.0f} m", at)
             return self._stop
         if self._stop is not None:
-            self._clear_s += period_s
+            self._clear_s += max(elapsed, period_s)
             if self._clear_s < self.resume_after_s - 1e-9:
                 return self._stop  # hold on until the way has stayed clear a while
         self._stop, self._clear_s = None, 0.0
