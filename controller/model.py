@@ -6,6 +6,8 @@
 with eta = [x, y, psi] (NED, psi clockwise from north), nu = [u, v, r] the body-frame velocity
 over ground, and nu_r = nu - R(psi)^T [V_n, V_e, 0] the velocity through the water, so a
 constant current enters the damping and Coriolis terms (Fossen's relative-velocity model).
+An optional body-frame acceleration bias b = [b_u, b_v, b_r] (m/s^2, m/s^2, rad/s^2) adds to
+nu_dot: the rest of the model's error, as an on-line estimator finds it (zero for the plant).
 Thrust `F = c_eff nT|nT|` keeps reverse thrust negative; `delta = delta_max * nS / 100`;
 `tau = [F cos delta, F sin delta, -ly F sin delta]`, so nS > 0 turns the boat to port.
 
@@ -97,8 +99,9 @@ def damping(nu, P: dict, variant: Variant = EXACT):
     return -linear - quadratic
 
 
-def boat_ode(state, command, p, current=(0.0, 0.0), variant: Variant = EXACT):
-    """x_dot = f(x, u, P) of eq. final, with the water current [V_north, V_east] in m/s."""
+def boat_ode(state, command, p, current=(0.0, 0.0), variant: Variant = EXACT, bias=None):
+    """x_dot = f(x, u, P) of eq. final, with the water current [V_north, V_east] in m/s and
+    an optional body-frame acceleration bias [b_u, b_v, b_r]."""
     P = unpack_params(p)
     psi, nu = state[2], state[3:6]
     R = rotation(psi)
@@ -109,6 +112,8 @@ def boat_ode(state, command, p, current=(0.0, 0.0), variant: Variant = EXACT):
     tau = thrust(command, P, variant)
     rhs = tau - ca.mtimes(coriolis(nu_r, P), nu_r) - ca.mtimes(damping(nu_r, P, variant), nu_r)
     nu_dot = nu_c_dot + rhs / ca.diag(mass_matrix(P))  # M is diagonal (eq. M_matrix)
+    if bias is not None:
+        nu_dot = nu_dot + ca.vertcat(bias[0], bias[1], bias[2])
     eta_dot = ca.mtimes(R, nu)
     return ca.vertcat(eta_dot, nu_dot)
 
@@ -183,6 +188,6 @@ def plant_step_function(variant: Variant = EXACT) -> ca.Function:
     )
 
 
-def augmented_ode(x8, du, p, current=(0.0, 0.0), variant: Variant = SMOOTH):
+def augmented_ode(x8, du, p, current=(0.0, 0.0), variant: Variant = SMOOTH, bias=None):
     """The NMPC's model: state [x, y, psi, u, v, r, nT, nS], input [dnT, dnS] in %/s."""
-    return ca.vertcat(boat_ode(x8[:NX], x8[NX:NX + NU], p, current, variant), du)
+    return ca.vertcat(boat_ode(x8[:NX], x8[NX:NX + NU], p, current, variant, bias), du)

@@ -34,6 +34,10 @@ def register(sub) -> None:
                    help="noise seed, a whole number >= 0 (default: the scenario's)")
     p.add_argument("--plant", default="fmu", help="plant: fmu (default), python-model, mavlink-sim")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    p.add_argument("--water", choices=("estimated", "still", "true"), default=None,
+                   help="what the NMPC knows of the current and its model's error: the on-line "
+                   "estimate, nothing, or the scenario's true current (default: the "
+                   "scenario's [controller.options] water, else estimated)")
     p.add_argument("--serial-perception", action="store_true",
                    help="scan and detect in this process, not in a worker on another core "
                    "(same results, more wall time)")
@@ -46,6 +50,10 @@ def run(args) -> int:
     from scenarios.scenario_file import load_scenario
 
     scenario = load_scenario(args.scenario)
+    if args.water is not None:
+        from scenarios.loop.runner import with_water
+
+        scenario = with_water(scenario, args.water)
     controller = args.controller or scenario.controller
     out = Path(args.out or f"runs/{scenario.name}-{controller}")
     progress = terminal_progress() if sys.stderr.isatty() else None

@@ -41,6 +41,10 @@ class FmuPlant:
         )
         return self._output(out)
 
+    def set_current(self, current_ne) -> None:
+        """The current (north, east, m/s) from now on: the FMU's current inputs."""
+        self._boat.set_current(float(current_ne[0]), float(current_ne[1]))
+
     def step(self, command, dt: float) -> PlantOutput:
         nT, nS = np.clip(np.asarray(command, float), -100.0, 100.0)
         return self._output(self._boat.step(float(nT), float(nS), dt))

@@ -41,11 +41,17 @@ class PlantOutput:
 class Plant(Protocol):
     """What the closed loop needs of a boat."""
 
+    def set_current(self, current_ne) -> None:
+        """The current (north, east, m/s) from now on (it may change along the canal)."""
+        self._current = np.asarray(current_ne, float)
+
     def reset(self, state0, current_ne=(0.0, 0.0)) -> PlantOutput: ...
 
     def step(self, command, dt: float) -> PlantOutput: ...
 
     def close(self) -> None: ...
+
+    # optional: `set_current(current_ne)` for a current that changes along the canal
 
 
 class ModelPlant:

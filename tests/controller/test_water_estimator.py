@@ -1,0 +1,116 @@
+"""The water current and the model's error, estimated on line (issue 18): convergence on the
+model itself, what separates a current from a model error, and run-time data that must not
+stop it."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from controller.errors import InputError
+from controller.model import EXACT, plant_step_function
+from controller.params import IDENTIFIED
+from controller.water_estimator import WaterEstimator, WaterEstimatorConfig
+
+PLANT = plant_step_function(EXACT)
+
+
+def drive(current_fn, params=IDENTIFIED, seconds=90.0, steer=lambda t: 0.0, seed=0,
+          config=WaterEstimatorConfig(), spoil=None):
+    """The exact model at 47 % throttle with noisy state estimates into the estimator; the
+    estimates (time, estimate) once a second."""
+    p = params.as_vector()
+    rng = np.random.default_rng(seed)
+    est = WaterEstimator(config)
+    x, act = np.array([0.0, 0.0, 0.0, 2.0, 0.0, 0.0]), np.array([47.0, 0.0])
+    out = []
+    for k in range(int(seconds / 0.1)):
+        t = k * 0.1
+        for _ in range(10):
+            xn, an, _ = PLANT(x, act, [47.0, steer(t)], p, current_fn(t), [10.0, 40.0], 0.01)
+            x, act = np.asarray(xn).ravel(), np.asarray(an).ravel()
+        measured = x + rng.normal(0.0, [0.02, 0.02, 0.002, 0.005, 0.005, 0.001])
+        if spoil is not None:
+            measured = spoil(k, measured)
+        e = est.update(measured, act)
+        if k % 10 == 9:
+            out.append((t + 0.1, e))
+    return out
+
+
+def first_within(out, truth_fn, tol=0.05):
+    """The first time from which the estimate stays within tol of the truth."""
+    ok = [np.hypot(*(e.current_ne - np.asarray(truth_fn(t)))) <= tol for t, e in out]
+    for i in range(len(ok)):
+        if all(ok[i:]):
+            return out[i][0]
+    return None
+
+
+@pytest.mark.parametrize("current", [(0.0, 0.3), (-0.6, 0.0), (0.35, -0.35)])
+def test_a_steady_current_is_found_within_30_s(current):
+    out = drive(lambda t: current)
+    assert first_within(out, lambda t: current) <= 30.0
+    final = out[-1][1]
+    assert np.allclose(final.current_ne, current, atol=0.03)
+    assert np.all(final.current_sigma < 0.1)
+
+
+def test_a_model_error_with_no_current_is_not_read_as_a_current():
+    """plant_mismatch's plant: 20 % heavier, less damped, less thrust, slower in yaw; turns."""
+    plant = replace(IDENTIFIED, m11=2297.88, m22=2188.56, m33=2322.12, Xu=-23.376,
+                    Xuu=-43.4752, Nr=-2632.8, Nrr=-247.728, c=1.06648e-5)
+    out = drive(lambda t: (0.0, 0.0), plant, 120.0, steer=lambda t: 20 * np.sin(t / 10))
+    assert first_within(out, lambda t: (0.0, 0.0)) <= 30.0
+
+
+def test_a_current_that_changes_under_the_boat_is_followed():
+    side = lambda t: (0.0, 0.0) if t < 40 else (0.0, 0.5) if t < 70 else (-0.2, 0.1)  # noqa
+    out = drive(side, seconds=110.0)
+    at = {round(t): e for t, e in out}
+    assert np.allclose(at[65].current_ne, (0.0, 0.5), atol=0.05)
+    assert np.allclose(at[110].current_ne, (-0.2, 0.1), atol=0.05)
+    assert out[-1][1].reopened >= 1  # the sudden jump opened the filter up again
+
+
+def test_only_steady_windows_are_used():
+    """Speeding up from rest would read a mass error as a current: such windows are left out."""
+    est = WaterEstimator()
+    p = IDENTIFIED.as_vector()
+    x, act = np.zeros(6), np.zeros(2)
+    for _ in range(100):  # 10 s of speeding up from rest at full throttle
+        for _ in range(10):
+            xn, an, _ = PLANT(x, act, [100.0, 0.0], p, (0.0, 0.0), [10.0, 40.0], 0.01)
+            x, act = np.asarray(xn).ravel(), np.asarray(an).ravel()
+        e = est.update(x, act)
+    assert est.unsteady >= 4 and e.updates + est.unsteady == 9  # 9 full windows in 10 s
+
+
+def test_bad_data_is_skipped_and_counted_never_raised():
+    def spoil(k, x):
+        if k % 37 == 5:
+            x = x.copy()
+            x[3] = np.nan  # a hole in the navigation data
+        if k == 300:
+            x = x + np.array([50.0, 0, 0, 0, 0, 0])  # a jump (a filter reset)
+        if k == 600:
+            x = x.copy()
+            x[3] += 3.0  # an absurd speed, once
+        return x
+
+    out = drive(lambda t: (0.0, 0.3), seconds=90.0, spoil=spoil)
+    final = out[-1][1]
+    assert final.skipped >= 3
+    assert np.allclose(final.current_ne, (0.0, 0.3), atol=0.03)
+    est = WaterEstimator()
+    est.update("garbage", [1, 2])  # not even numbers
+    est.update([1, 2, 3], [0, 0])  # the wrong size
+    assert est.skipped == 2
+
+
+@pytest.mark.parametrize("field, value", [("window_s", 0.0), ("current_walk", -1.0),
+                                          ("velocity_sigma", (0.0, 0.1, 0.1)),
+                                          ("bias_walk", (1.0, 2.0)), ("gate_sigma", float("nan"))])
+def test_bad_configuration_is_a_clear_error(field, value):
+    with pytest.raises(InputError, match=field):
+        WaterEstimatorConfig(**{field: value})
