@@ -1,0 +1,176 @@
+"""Seamanship in a narrow channel, as the COLREGs put it, turned into the NMPC's reference.
+
+The vessel slots keep the boat clear of other vessels whatever the reference says; these
+rules decide where the reference asks it to be, so that it passes the way other boats expect:
+
+- Meeting (Rules 9 and 14): a vessel ahead coming the other way: keep to the starboard side
+  of the channel, so the two pass port to port. The reference path moves to starboard by half
+  of the room on that side, never closer than R_b + d_p to the starboard wall.
+- Overtaking (Rules 9(e) and 13): a slower vessel ahead going the same way: pass it on its port
+  side where the channel leaves room beside it (two hull circles and both separations, 2 R_b
+  + d_v + d_p), else on its starboard side; with room on neither, follow it: no faster than
+  it goes, and stop short of it by `follow_gap_m` (its stern to our bow).
+- Crossing (Rule 15): a vessel that will cross the route ahead from the starboard side while
+  the boat would be there is given way to by slowing: the reference stops short of the
+  crossing point until the vessel has cleared it (passing astern of it). A small craft
+  (shorter than `small_craft_m`: a kayak, a rowing boat) is given way to from either side.
+- Stand on (Rule 17): a vessel crossing from port keeps out of our way: course and speed stay
+  as planned (the vessel slot still keeps the boat clear if it does not).
+
+Everything is worked out in the route's frame (arc length s along the waypoint path, offset d
+across it, + to starboard) from the tracks' positions and velocities. Why the reference and
+not the cost: the cost still weighs the plan against the reference exactly as in the paper,
+the constraints stay the safety net, and each rule is one line of geometry a reader can check.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .reference import WaypointPath
+from .slack_reference import walls_abeam
+
+
+@dataclass(frozen=True)
+class Encounter:
+    """How one vessel stands to the boat, and what the rules ask for."""
+
+    track_id: object
+    kind: str  # meeting | overtaking | following | give_way | stand_on | astern | clear
+    distance_m: float  # along the route, its centre from the boat (< 0: behind)
+
+
+@dataclass(frozen=True)
+class Shaping:
+    """What the rules ask of the reference this period."""
+
+    offset_m: float = 0.0  # move the reference path across (+ to starboard)
+    speed_mps: float | None = None  # a speed cap (follow a slower vessel)
+    stop_at_m: float | None = None  # stop here (arc length along the path), until it clears
+    reason: str = ""  # "meeting 3: keep to starboard", for the log
+    encounters: tuple = ()
+
+
+def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed_mps: float,
+           segments, *, hull_radius_m: float, separation_m: float, vessel_separation_m: float,
+           bow_m: float, follow_gap_m: float = 20.0, lookahead_m: float = 70.0,
+           small_craft_m: float = 6.0) -> Shaping:
+    """The reference shaping for the tracked vessels (`perception.tracking.Track`-like:
+    position, velocity, length_m, width_m, id); segments give the channel's walls."""
+    if not tracks:
+        return Shaping()
+    segs = np.asarray(segments, float).reshape(-1, 4)
+    Rb, dp, dv = hull_radius_m, separation_m, vessel_separation_m
+    speed_cap, stop, reasons, encounters = None, None, [], []
+    meet_offset, pass_offsets = 0.0, []
+    xy0, heading0 = path.at(progress_m)
+    port0, stbd0 = _room(xy0, heading0, 0.0, segs)
+    overtakes = []  # (track, s, d, half_len, half_wid, along, port_gap, stbd_gap)
+    for tr in tracks:
+        p = np.asarray(tr.position, float).reshape(2)
+        v = np.asarray(tr.velocity, float).reshape(2)
+        s, d = path.frame(p[None], max(progress_m - 40.0, 0.0), progress_m + lookahead_m)
+        s, d = float(s[0]), float(d[0])
+        _, heading = path.at(s)
+        h = float(heading[0])
+        along = float(v[0] * math.cos(h) + v[1] * math.sin(h))
+        across = float(-v[0] * math.sin(h) + v[1] * math.cos(h))  # + to starboard
+        ahead = s - progress_m
+        half_len, half_wid = 0.5 * float(tr.length_m), 0.5 * float(tr.width_m)
+        kind = "clear"
+        if ahead + half_len < -bow_m or ahead > lookahead_m:
+            kind = "astern" if ahead < 0 else "clear"
+        elif abs(d) > half_wid + Rb + dv + 8.0 and abs(across) < 0.2:
+            kind = "clear"  # well aside and not closing: moored, or on another channel
+        elif _crossing(d, across, half_wid):
+            crossing = _conflict(ahead, d, along, across, half_len, half_wid, speed_mps,
+                                 Rb + dv + bow_m)
+            if crossing is not None:
+                small = float(tr.length_m) < small_craft_m
+                from_starboard = across < 0  # it moves to port: it comes from starboard
+                if from_starboard or small:  # give way (to a small craft from either side)
+                    kind = "give_way"
+                    at = progress_m + crossing - (Rb + dv + bow_m + half_wid)
+                    stop = at if stop is None else min(stop, at)
+                    reasons.append(f"give way to {tr.id} crossing from "
+                                   f"{'starboard' if from_starboard else 'port'}")
+                else:
+                    kind = "stand_on"
+        elif abs(along) < 0.5 or abs(along) < abs(across):
+            kind = "clear"  # drifting, or moving away across the route: the slot keeps clear
+        elif along < 0 and ahead > 0:
+            kind = "meeting"
+            room = stbd0 - (Rb + dp)  # how far to starboard the boat may go
+            move = max(min(0.5 * stbd0, room), 0.0) if math.isfinite(stbd0) else Rb + dp
+            meet_offset = max(meet_offset, move)
+            reasons.append(f"meeting {tr.id}: keep to starboard")
+        elif ahead > 0 and along < speed_mps - 0.3:
+            kind = "overtaking"  # or following, decided below
+            xy_v, _ = path.at(s)
+            port, stbd = _room(xy_v, heading, 0.0, segs)  # the channel abeam of the vessel
+            port = port if math.isfinite(port) else port0  # not seen there yet: as it is here
+            stbd = stbd if math.isfinite(stbd) else stbd0
+            overtakes.append((tr, s, d, half_len, half_wid, along,
+                              (d - half_wid) + port, stbd - (d + half_wid), len(encounters),
+                              port, stbd))
+        encounters.append(Encounter(tr.id, kind, ahead))
+    # Overtake only with room beside the vessel and nobody coming the other way.
+    need = 2 * Rb + dv + dp
+    for tr, s, d, half_len, half_wid, along, port_gap, stbd_gap, k, port, stbd in overtakes:
+        side = None
+        if meet_offset == 0.0 and port_gap >= need:  # the boat's place: clear of both
+            side, target = "port", max(d - half_wid - dv - Rb, -(port - Rb - dp))
+        elif meet_offset == 0.0 and stbd_gap >= need:
+            side, target = "starboard", min(d + half_wid + dv + Rb, stbd - Rb - dp)
+        if side is not None:
+            pass_offsets.append(target)
+            reasons.append(f"overtaking {tr.id} on its {side} side")
+            continue
+        encounters[k] = Encounter(tr.id, "following", encounters[k].distance_m)
+        speed_cap = along if speed_cap is None else min(speed_cap, along)
+        at = s - half_len - bow_m - follow_gap_m
+        stop = at if stop is None else min(stop, at)
+        reasons.append(f"following {tr.id}: no room to overtake"
+                       + (" with a vessel coming the other way" if meet_offset else ""))
+    offset = meet_offset if meet_offset else (
+        min(pass_offsets, key=abs) if pass_offsets else 0.0)
+    if speed_cap is not None:
+        speed_cap = max(speed_cap, 0.0)
+    return Shaping(offset, speed_cap, stop, "; ".join(reasons), tuple(encounters))
+
+
+def _room(xy, heading, offset_m, segs) -> tuple[float, float]:
+    """Distance from the path point (moved `offset_m` across) to the walls abeam, port and
+    starboard (inf: none seen)."""
+    pts = np.asarray(xy, float).reshape(-1, 2)
+    h = np.asarray(heading, float).reshape(-1)
+    if offset_m:
+        pts = pts + offset_m * np.column_stack([-np.sin(h), np.cos(h)])
+    port, stbd = walls_abeam(pts, h, segs)
+    return float(port[0]), float(stbd[0])
+
+
+def _crossing(d: float, across: float, half_wid: float) -> bool:
+    """The vessel is aside of the route and moving toward it (or across it)."""
+    return abs(across) > 0.2 and (d * across < 0 or abs(d) <= half_wid)
+
+
+def _conflict(ahead, d, along, across, half_len, half_wid, speed, reach):
+    """Where along the route (m ahead of the boat) the vessel crosses it, if the boat would
+    be there while the vessel is within `reach` of the route; else None."""
+    t_in = (abs(d) - half_len - reach) / abs(across)  # its hull reaches the route's zone
+    t_out = (abs(d) + half_len + reach) / abs(across)  # and has cleared it
+    t_in, t_out = max(t_in, 0.0), max(t_out, 0.0)
+    if t_out <= 0.0:
+        return None
+    at = ahead + along * 0.5 * (t_in + t_out)  # where on the route it crosses
+    if at < -reach:
+        return None  # it crosses behind the boat
+    if speed <= 0.05:
+        return at  # stopped: stay stopped while it crosses
+    t_boat_in = (at - reach) / speed
+    t_boat_out = (at + reach) / speed
+    return at if t_boat_in <= t_out and t_boat_out >= t_in else None

@@ -1,0 +1,141 @@
+"""Other vessels, measured: how close each came hull to hull and when, on which side it was
+passed, whether the boat kept to the starboard half of the channel while meeting it, and how
+well perception tracked it. Ground truth from the scenario, as for every clearance."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from controller.geometry import point_segment_distance, segments_cross
+
+from .metrics import HULL_BREADTH_M, HULL_LENGTH_M
+
+
+def hull_outline(pose, length_m: float = HULL_LENGTH_M, breadth_m: float = HULL_BREADTH_M):
+    """The own hull's waterline rectangle (4, 2) at pose (x, y, psi)."""
+    a, b = length_m / 2, breadth_m / 2
+    local = np.array([[a, b], [-a, b], [-a, -b], [a, -b]])
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    return np.column_stack([pose[0] + c * local[:, 0] - s * local[:, 1],
+                            pose[1] + s * local[:, 0] + c * local[:, 1]])
+
+
+def polygon_distance(p: np.ndarray, q: np.ndarray) -> float:
+    """Least distance between two polygons' outlines (K, 2) and (L, 2); 0 when they touch or
+    one lies inside the other (a collision)."""
+    pa, pb = p, np.roll(p, -1, axis=0)
+    qa, qb = q, np.roll(q, -1, axis=0)
+    if segments_cross(pa, pb, qa, qb).any() or _inside(p[0], q) or _inside(q[0], p):
+        return 0.0
+    return float(min(point_segment_distance(p, qa, qb).min(),
+                     point_segment_distance(q, pa, pb).min()))
+
+
+def _inside(point, ring) -> bool:
+    a, b = ring, np.roll(ring, -1, axis=0)
+    straddle = (a[:, 1] > point[1]) != (b[:, 1] > point[1])
+    dy = np.where(b[:, 1] != a[:, 1], b[:, 1] - a[:, 1], 1.0)
+    x_at = a[:, 0] + (point[1] - a[:, 1]) * (b[:, 0] - a[:, 0]) / dy
+    return bool(((straddle & (point[0] < x_at)).sum() % 2) == 1)
+
+
+class EncounterWatch:
+    """Per vessel, step by step: hull-to-hull distance, the side it is on, meeting."""
+
+    def __init__(self, vessels):
+        self.vessels = tuple(vessels)
+        n = len(self.vessels)
+        self.min_distance = np.full(n, np.inf)
+        self.min_at = np.full(n, np.nan)
+        self.side_at_min = [None] * n
+        self.meeting_steps = np.zeros(n, int)
+        self.meeting_starboard = np.zeros(n, int)
+
+    def update(self, time_s: float, pose, centre_offset_m: float) -> float:
+        """Record one step; returns the least hull-to-hull distance to any vessel (inf if
+        none). `centre_offset_m`: the boat's offset from the channel's middle (+ starboard)."""
+        if not self.vessels:
+            return math.inf
+        own = hull_outline(pose)
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        least = math.inf
+        for k, v in enumerate(self.vessels):
+            other = v.outline_at(time_s)
+            d = polygon_distance(own, other)
+            least = min(least, d)
+            vp = v.pose_at(time_s)
+            rel = vp[:2] - np.asarray(pose[:2], float)
+            across = -s * rel[0] + c * rel[1]  # + : on our starboard side
+            if d < self.min_distance[k]:
+                self.min_distance[k], self.min_at[k] = d, time_s
+                self.side_at_min[k] = "starboard" if across > 0 else "port"
+            ahead = c * rel[0] + s * rel[1]
+            vv = v.velocity_at(time_s)
+            opposite = (vv[0] * c + vv[1] * s) < -0.3  # it comes the other way
+            if opposite and -v.hull.length_m < ahead < 60.0 and np.isfinite(centre_offset_m):
+                self.meeting_steps[k] += 1
+                self.meeting_starboard[k] += centre_offset_m > 0.0
+        return least
+
+    def summary(self, dt: float) -> list[dict]:
+        out = []
+        for k, v in enumerate(self.vessels):
+            meet = int(self.meeting_steps[k])
+            out.append({
+                "name": v.name,
+                "min_hull_distance_m": None if not np.isfinite(self.min_distance[k])
+                else round(float(self.min_distance[k]), 6),
+                "min_hull_distance_at_s": None if np.isnan(self.min_at[k])
+                else round(float(self.min_at[k]), 3),
+                "passed_on": self.side_at_min[k],  # which side of the boat it was on
+                "time_meeting_s": round(meet * dt, 3),
+                "starboard_half_while_meeting": None if meet == 0
+                else round(float(self.meeting_starboard[k]) / meet, 4),
+            })
+        return out
+
+
+class TrackingWatch:
+    """How well the confirmed tracks followed the true vessels: each confirmed track is
+    matched to the nearest true vessel (centre within `match_m`), position and velocity
+    errors are pooled; a moving track that matches none is a false vessel."""
+
+    def __init__(self, vessels, match_m: float = 6.0, visible_m: float = 55.0):
+        self.vessels = tuple(vessels)
+        self.match_m, self.visible_m = match_m, visible_m
+        self._pos_err, self._vel_err = [], []
+        self.first_visible = [None] * len(self.vessels)
+        self.first_confirmed = [None] * len(self.vessels)
+        self._false: dict = {}  # track id -> seconds as a false moving vessel
+
+    def update(self, time_s: float, pose, tracks, dt: float) -> None:
+        truth = [(v.pose_at(time_s), v.velocity_at(time_s)) for v in self.vessels]
+        for k, (vp, _) in enumerate(truth):
+            near = np.hypot(*(vp[:2] - np.asarray(pose[:2]))) <= self.visible_m
+            if near and self.first_visible[k] is None:
+                self.first_visible[k] = time_s
+        for tr in tracks:
+            p = np.asarray(tr.position, float)
+            dist = [np.hypot(*(p - vp[:2])) for vp, _ in truth]
+            k = int(np.argmin(dist)) if dist else -1
+            if k >= 0 and dist[k] <= self.match_m:
+                self._pos_err.append(dist[k])
+                self._vel_err.append(float(np.hypot(*(np.asarray(tr.velocity) - truth[k][1]))))
+                if self.first_confirmed[k] is None:
+                    self.first_confirmed[k] = time_s
+            elif getattr(tr, "moving", True):
+                self._false[tr.id] = self._false.get(tr.id, 0.0) + dt
+
+    def summary(self) -> dict:
+        def rms(x):
+            return None if not x else round(float(np.sqrt(np.mean(np.square(x)))), 4)
+
+        delays = [None if v is None or c is None else round(c - v, 3)
+                  for v, c in zip(self.first_visible, self.first_confirmed)]
+        return {"position_rms_m": rms(self._pos_err), "velocity_rms_mps": rms(self._vel_err),
+                "confirmed_after_visible_s": dict(zip((v.name for v in self.vessels), delays)),
+                "false_vessel_tracks": len(self._false),
+                "longest_false_vessel_s": round(max(self._false.values()), 3)
+                if self._false else 0.0}
