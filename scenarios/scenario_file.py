@@ -26,6 +26,9 @@ from .sensors.gps_ahrs import AhrsConfig, GpsConfig
 from .world.canal import OBSTACLE_KINDS, CanalWorld, Obstacle, Wall, WorldError, walls_crossing
 
 CONTROLLERS = ("nmpc", "los-pid", "lexicographic")
+WATER_MODES = ("estimated", "still", "true")
+"""What the NMPC knows of the water: the on-line estimate (default), nothing (still water),
+or the scenario's true current (as from a current meter)."""
 PERCEPTIONS = ("lidar", "known-walls")
 
 
@@ -44,6 +47,9 @@ class Criteria:
     min_first_detected_m: float | None = None  # each obstacle first seen at least this far off
     min_time_held_s: float | None = None  # held at rest before a blocked way at least this long
     max_speed_while_held_mps: float | None = None  # and no faster than this while held
+    min_vessel_distance_m: float | None = None  # hull to hull, to every other vessel
+    vessels_passed_on: str | None = None  # each vessel on this side of the boat when closest
+    min_starboard_half_while_meeting: float | None = None  # share of the meeting time
 
 
 @dataclass(frozen=True)
@@ -55,7 +61,7 @@ class Scenario:
     waypoints: np.ndarray  # (K, 2)
     target_speed_mps: float
     initial_state: np.ndarray  # [x, y, psi, u, v, r]
-    current_ne: tuple[float, float]
+    current_ne: tuple[float, float]  # the current at the start (everywhere, if no profile)
     duration_s: float
     goal_radius_m: float
     seed: int
@@ -77,6 +83,17 @@ class Scenario:
     lidar_noise: LidarNoise = LidarNoise()
     lidar_outages_s: tuple = ()  # (start, end) spans with no scan (a sensor fault, for tests)
     max_scan_age_s: float = 1.0  # the last segments stand in this long, then "blind"
+    current_profile: tuple | None = None  # ((s_m, north, east), ...) along the centre line
+
+    @property
+    def current_field(self):
+        """The water current over the canal (`scenarios.world.current.CurrentField`)."""
+        from .world.current import CurrentField
+
+        if self.current_profile is None:
+            return CurrentField(tuple(self.current_ne))
+        return CurrentField(tuple(self.current_ne), np.array(self.current_profile),
+                            self.world.centre_line)
 
 
 # -- small typed readers that name the field -------------------------------------------------
@@ -336,6 +353,88 @@ def _load_obstacles(doc: _Table) -> tuple:
     return tuple(out)
 
 
+def _load_vessels(doc: _Table, world: CanalWorld, duration_s: float, seed: int) -> tuple:
+    """[[vessel]]: name, [vessel.hull] and a motion, [vessel.route] or [vessel.course]; each
+    must start on open water, keep off the walls and not start inside another object."""
+    from .world.vessels import HULL_SHAPES, Hull, Vessel
+
+    out = []
+    for k, v in enumerate(doc.tables("vessel")):
+        name = v.string("name", f"vessel {k}")
+        h = v.table("hull", required=True)
+        hull_args = dict(length_m=h.number("length_m", required=True, low=0, strict=True),
+                         beam_m=h.number("beam_m", required=True, low=0, strict=True),
+                         height_m=h.number("height_m", 1.5, low=0, strict=True),
+                         shape=h.string("shape", "pointed", choices=HULL_SHAPES))
+        h.done()
+        hull = Hull(**hull_args)
+        route, course = v.table("route"), v.table("course")
+        if (route is None) == (course is None):
+            raise v.err("route", "give the vessel a [vessel.route] (waypoints and a speed) or "
+                        "a [vessel.course] (start, course and speed), one of the two")
+        if route is not None:
+            motion = route
+            waypoints = route.points("waypoints", required=True, min_points=2)
+            if np.any(np.hypot(*np.diff(waypoints, axis=0).T) <= 0):
+                raise route.err("waypoints", "repeats a point")
+            speed = route.number("speed_mps", required=True, low=0)
+            start = route.number("start_s", 0.0, low=0)
+            waits = []
+            if route.has("waits"):
+                raw = route.raw("waits")
+                ok = isinstance(raw, list) and all(
+                    isinstance(w, list) and len(w) == 2 and isinstance(w[0], int)
+                    and not isinstance(w[0], bool) and 0 < w[0] < len(waypoints)
+                    and _is_number(w[1]) and w[1] >= 0 for w in raw)
+                if not ok:
+                    raise route.err("waits", f"expected [waypoint index (1..{len(waypoints) - 1}), "
+                                    f"seconds >= 0] pairs, got {raw!r}")
+                waits = [(int(a), float(b)) for a, b in raw]
+            route.done()
+            vessel = Vessel.on_route(name, hull, waypoints, speed, duration_s, start, waits)
+            where, line = route, waypoints
+        else:
+            motion = course
+            start_xy = (course.number("x_m", required=True), course.number("y_m", required=True))
+            heading = math.radians(course.number("course_deg", required=True))
+            speed = course.number("speed_mps", required=True, low=0)
+            start = course.number("start_s", 0.0, low=0)
+            wander = course.number("wander_degps", 0.0, low=0)
+            distance = course.number("distance_m", None, low=0, strict=True)
+            course.done()
+            vessel = Vessel.on_course(name, hull, start_xy, heading, speed, duration_s, start,
+                                      wander, seed=seed * 7919 + 11 + k, distance_m=distance)
+            where, line = course, vessel.poses[:, :2]
+        v.done()
+        _check_vessel(world, vessel, where, "waypoints" if route is not None else "x_m", line,
+                      out)
+        out.append(vessel)
+    return tuple(out)
+
+
+def _check_vessel(world: CanalWorld, vessel, t: _Table, key: str, line, others) -> None:
+    """The vessel starts on open water, its track crosses no wall, and it does not start
+    inside an obstacle or another vessel."""
+    from controller.geometry import polyline_legs, segments_cross
+
+    outline = vessel.outline_at(0.0)
+    why = [r for r in world.off_water(np.vstack([vessel.pose_at(0.0)[:2], outline])) if r]
+    if why:
+        raise t.err(key, f"vessel {vessel.name!r} starts off the water: its hull lies {why[0]}")
+    a, b = polyline_legs(world.wall_polylines())
+    track = np.asarray(line, float)
+    hits = segments_cross(track[:-1], track[1:], a, b)
+    if hits.any():
+        leg = int(np.argwhere(hits)[0][0])
+        raise t.err(key, f"vessel {vessel.name!r}: its track crosses a wall near "
+                    f"({track[leg, 0]:.1f}, {track[leg, 1]:.1f}); keep it on the water over the "
+                    f"whole run (shorten the route, or the course's speed or start)")
+    for o in list(world.obstacles) + [w.obstacle_at(0.0) for w in others]:
+        if o.z_bottom_m == 0 and (o.contains(outline).any()
+                                  or Obstacle(outline).contains(o.outline).any()):
+            raise t.err(key, f"vessel {vessel.name!r} starts inside {o.name!r}")
+
+
 @dataclass(frozen=True)
 class _Route:
     """Waypoints and, for each, the field to blame if it is wrong."""
@@ -458,6 +557,11 @@ def parse_scenario(text: str, source: str = "<string>", path: Path | None = None
 
     obstacles = _load_obstacles(doc)
     world = _load_canal(doc.table("canal", required=True), obstacles, name)
+    vessels = _load_vessels(doc, world, duration, seed)
+    if vessels:
+        from dataclasses import replace as _replace
+
+        world = _replace(world, vessels=vessels)
 
     route = doc.table("route", required=True)
     planned = _route(route, world)
@@ -475,6 +579,15 @@ def parse_scenario(text: str, source: str = "<string>", path: Path | None = None
 
     cur = doc.table("current") or _Table({}, "current", source)
     current = (cur.number("north_mps", 0.0), cur.number("east_mps", 0.0))
+    profile = _current_profile(cur, world, x0)
+    if profile is not None:
+        if cur.has("north_mps") or cur.has("east_mps"):
+            raise cur.err("profile", "give north_mps / east_mps (one current everywhere) or a "
+                          "profile along the canal, not both")
+        from .world.current import CurrentField
+
+        current = tuple(float(v) for v in CurrentField(
+            (0.0, 0.0), np.array(profile), world.centre_line).at(x0[:2]))
     cur.done()
 
     origin = None
@@ -532,6 +645,10 @@ def parse_scenario(text: str, source: str = "<string>", path: Path | None = None
         min_first_detected_m=crit.number("min_first_detected_m", None, low=0),
         min_time_held_s=crit.number("min_time_held_s", None, low=0),
         max_speed_while_held_mps=crit.number("max_speed_while_held_mps", None, low=0),
+        min_vessel_distance_m=crit.number("min_vessel_distance_m", None, low=0),
+        vessels_passed_on=crit.string("vessels_passed_on", None, choices=("port", "starboard")),
+        min_starboard_half_while_meeting=crit.number("min_starboard_half_while_meeting", None,
+                                                     low=0, high=1),
     )
     crit.done()
     doc.done()
@@ -545,8 +662,27 @@ def parse_scenario(text: str, source: str = "<string>", path: Path | None = None
         controller_options=options, criteria=criteria, default_test=default_test,
         snapshot_times_s=snaps, geodetic_origin=origin, replay_mount=replay_mount,
         gps=gps, ahrs=ahrs, lidar_noise=lidar_noise, lidar_outages_s=outages,
-        max_scan_age_s=max_scan_age,
+        max_scan_age_s=max_scan_age, current_profile=profile,
     )
+
+
+def _current_profile(cur: _Table, world: CanalWorld, x0) -> tuple | None:
+    """[current] profile: [s_m, north_mps, east_mps] rows along the centre line."""
+    if not cur.has("profile"):
+        return None
+    rows = cur.raw("profile")
+    ok = isinstance(rows, list) and rows and all(
+        isinstance(r, list) and len(r) == 3 and all(_is_number(v) and math.isfinite(v) for v in r)
+        for r in rows)
+    if not ok:
+        raise cur.err("profile", f"expected a list of [s_m, north_mps, east_mps] rows, got {rows!r}")
+    s = [float(r[0]) for r in rows]
+    if any(b <= a for a, b in zip(s, s[1:])):
+        raise cur.err("profile", f"the s_m values must increase, got {s}")
+    if world.centre_line is None:
+        raise cur.err("profile", "a current profile runs along the canal's centre line; give "
+                      "[canal] centre_line")
+    return tuple(tuple(float(v) for v in r) for r in rows)
 
 
 def _initial_state(init: _Table, waypoints: np.ndarray, world: CanalWorld) -> np.ndarray:
@@ -653,7 +789,8 @@ FIXED_BY_THE_LOOP = {
 
 def _controller_options(t: _Table, controller: str, d_p_m: float, params: BoatParams) -> dict:
     """[controller.options], checked now so a bad value never reaches a run: the NMPC takes
-    NmpcConfig's fields by name plus `method` and `knows_current`; the baselines take none."""
+    NmpcConfig's fields by name plus `method`, `water` (and its older form `knows_current`);
+    the baselines take none."""
     if controller != "nmpc":
         if t.data:
             raise t.err(sorted(t.data)[0], f"the {controller} controller takes no options "
@@ -672,6 +809,8 @@ def _controller_options(t: _Table, controller: str, d_p_m: float, params: BoatPa
             t.string("method", choices=METHODS)
         elif key == "knows_current":
             t.boolean("knows_current")
+        elif key == "water":
+            t.string("water", choices=WATER_MODES)
         elif key == "separation_m":
             raise t.err(key, "d_p is set by controller.d_p_m")
         elif key == "boat":
@@ -681,8 +820,11 @@ def _controller_options(t: _Table, controller: str, d_p_m: float, params: BoatPa
         elif key in settable:
             config[key] = _option_value(t, key, hints[key])
         else:
-            raise t.err(key, "unknown NMPC option (known: method, knows_current, "
+            raise t.err(key, "unknown NMPC option (known: method, water, knows_current, "
                         f"{', '.join(settable)})")
+    if "knows_current" in t.data and "water" in t.data:
+        raise t.err("knows_current", "give water = \"true\" (or \"estimated\", \"still\"), "
+                    "not both water and knows_current")
     try:
         NmpcConfig(separation_m=d_p_m, boat=params, **config)
     except (InputError, TypeError, ValueError) as exc:

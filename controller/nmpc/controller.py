@@ -23,8 +23,10 @@ from .problem import NU, NX, NX_BOAT, NmpcConfig, ParamLayout, build_ocp, pack_p
 from .reference import Reference, WaypointPath, reference_trajectory, waypoint_path
 from .rti import QpOptions, QpStep, SqpResult, sqp
 from .passage import WayAhead
+from .seamanship import Shaping, assess
 from .segment_slots import SLOT_FIELDS, check_segments, select_segments
 from .slack_reference import forced_slack
+from .vessel_slots import predict_vessels
 
 METHODS = ("rti", "sqp", "ipopt")
 
@@ -50,6 +52,9 @@ class SolverStats:
     command_clipped: bool = False  # the plan's first move had to be cut to the bounds (> 1e-6)
     waiting: str = ""  # why the reference stops the boat ("way blocked at 23 m"), "" going on
     blocked_at_m: float | None = None  # arc length along the path of the obstruction
+    vessels: tuple = ()  # ids of the tracks in the vessel slots
+    vessels_dropped: int = 0  # vessels in range that found no slot
+    rules: str = ""  # what the rules of the road ask ("meeting 3: keep to starboard")
 
     @property
     def time_glue_s(self) -> float:
@@ -119,7 +124,7 @@ class NmpcController:
         self.search_ahead_m = reference_search_ahead_m
         self.ocp = build_ocp(config)
         # what does not change from step to step, computed once
-        self._layout = ParamLayout(config.segment_slots)
+        self._layout = ParamLayout.of(config)
         self._params = pack_params(config, np.zeros((config.segment_slots, len(SLOT_FIELDS))))
         self._lbw, self._ubw = self.ocp.bounds(np.zeros(NX_BOAT))
         self._x0_at = self.ocp.states_at[0]
@@ -151,11 +156,13 @@ class NmpcController:
         self._waypoints_given: np.ndarray | None = None
         self.consecutive_failures = 0
         self._way.reset()
+        self._rules_stop: Shaping | None = None
+        self._rules_clear_s = 0.0
 
     # -- the step ---------------------------------------------------------------------------
     def step(self, state, actuators, segments, waypoints, target_speed_mps: float,
              current=(0.0, 0.0), elapsed_s: float | None = None,
-             blind: bool = False) -> NmpcStep:
+             blind: bool = False, bias=(0.0, 0.0, 0.0), vessels=()) -> NmpcStep:
         """One control period.
 
         state: [x, y, psi, u, v, r] (NED m, rad, body m/s, rad/s); actuators: the current
@@ -163,7 +170,11 @@ class NmpcController:
         (the same list keeps the progress along it, a new one restarts it); current: water
         current [north, east] in m/s; elapsed_s: time since the previous call, by which the
         warm start is shifted (default: the control period; e.g. 1.0 for a 1 Hz planner);
-        blind: perception has had no usable scan for too long (`perception.feed`).
+        blind: perception has had no usable scan for too long (`perception.feed`); bias: the
+        model error as a body-frame acceleration [b_u, b_v, b_r] (m/s^2, rad/s^2), added to
+        the prediction model (`water_estimator` estimates it with the current); vessels:
+        tracks of other vessels (`perception.tracking.Track`), each avoided at every stage as
+        predicted from its track (`vessel_slots`).
         Where the segments leave no passage along the route, or when blind, the reference
         slows the boat to a stop short of it and holds (`passage`); `stats.waiting` says why.
         """
@@ -173,6 +184,7 @@ class NmpcController:
         act = _finite_vector(actuators, 2, "actuators [nT, nS]")
         act = np.clip(act, [-c.nT_max, -c.nS_max], [c.nT_max, c.nS_max])
         current = _finite_vector(current, 2, "current [north, east]")
+        bias = _finite_vector(bias, 3, "bias [b_u, b_v, b_r]")
         self._set_path(waypoints)
         speed = finite_number(target_speed_mps, "target_speed_mps")
         if not 0.0 <= speed <= self._top_speed:
@@ -185,15 +197,24 @@ class NmpcController:
         if guess is not None:
             x[2] = float(unwrap_near(x[2], guess[self.ocp.state_index(0)][2]))
         stop = self._stop(x, segments, speed, elapsed, bool(blind))
-        reference = reference_trajectory(self._path, x[:2], x[2], speed, c.horizon,
+        rules = self._rules(x, vessels, segments, speed, elapsed)
+        stop_at = None if stop is None else stop.at_m
+        if rules.stop_at_m is not None:
+            stop_at = rules.stop_at_m if stop_at is None else min(stop_at, rules.stop_at_m)
+        ref_speed = speed if rules.speed_mps is None else min(speed, rules.speed_mps)
+        reference = reference_trajectory(self._path, x[:2], x[2], ref_speed, c.horizon,
                                          c.step_s, self._progress_m, self.search_ahead_m,
-                                         None if stop is None else stop.at_m, c.stop_decel_mps2)
+                                         stop_at, c.stop_decel_mps2, current, rules.offset_m)
         planned = reference.states[:, :2] if guess is None else guess[self._xy_at]
         selection = select_segments(segments, x[:2], c.segment_slots, c.segment_range_m,
                                     planned)
         slots = selection.slots
+        vessel_sel = predict_vessels(vessels, c.vessel_slots, c.horizon, c.step_s, planned,
+                                     x[:2])
         p = self._params.copy()
+        p[self._layout.vessels] = vessel_sel.slots.ravel()
         p[self._layout.current] = current
+        p[self._layout.bias] = bias
         p[self._layout.segments] = slots.ravel()
         x_init = np.concatenate([x, act])
         lbw, ubw = self._lbw.copy(), self._ubw.copy()
@@ -231,9 +252,36 @@ class NmpcController:
                 fallback, plan = "shifted_plan", self._start_at(guess, x_init)
         self._plan = plan
         self._progress_m = reference.progress_m
-        return self._output(plan, act, reference, result, fallback, t0, selection, stop)
+        return self._output(plan, act, reference, result, fallback, t0, selection, stop,
+                            vessel_sel, rules)
 
     # -- pieces -----------------------------------------------------------------------------
+    def _rules(self, x: np.ndarray, vessels, segments, speed_mps: float,
+               elapsed_s: float) -> Shaping:
+        """What the rules of the road ask of the reference for these vessels (`seamanship`).
+        A stop to give way is held `resume_after_s` after the rules stop asking for it, so a
+        track's jitter (a kayak's wandering heading) cannot start and stop the boat."""
+        c = self.config
+        rules = Shaping()
+        if c.colreg and vessels:
+            s, d = self._path.frame(x[None, :2], self._progress_m,
+                                    self._progress_m + self.search_ahead_m)
+            rules = assess(vessels, self._path, float(s[0]), float(d[0]), speed_mps,
+                           check_segments(segments), hull_radius_m=c.hull_radius_m,
+                           separation_m=c.separation_m,
+                           vessel_separation_m=c.vessel_separation_m, bow_m=c.bow_m,
+                           follow_gap_m=c.follow_gap_m)
+        if rules.stop_at_m is not None:
+            self._rules_stop, self._rules_clear_s = rules, 0.0
+        elif self._rules_stop is not None:
+            self._rules_clear_s += elapsed_s
+            if self._rules_clear_s < c.resume_after_s - 1e-9:
+                held = self._rules_stop
+                return Shaping(rules.offset_m, held.speed_mps, held.stop_at_m,
+                               held.reason + " (holding)", rules.encounters)
+            self._rules_stop = None
+        return rules
+
     def _stop(self, x: np.ndarray, segments, speed_mps: float, elapsed_s: float, blind: bool):
         """The stop the reference must make this period (`passage.WayAhead`), or None."""
         c = self.config
@@ -359,7 +407,8 @@ class NmpcController:
         return self.ocp.pack(states, inputs)
 
     def _output(self, plan, act, reference, result: SqpResult, fallback: str,
-                t0: tuple[float, float], selection, stop=None) -> NmpcStep:
+                t0: tuple[float, float], selection, stop=None, vessel_sel=None,
+                rules=None) -> NmpcStep:
         c = self.config
         states, inputs = self.ocp.unpack(plan)
         rate_max = np.array([c.dnT_max, c.dnS_max])
@@ -377,6 +426,9 @@ class NmpcController:
             time_linearisation_s=result.time_linearisation_s, time_qp_s=result.time_qp_s,
             segments_dropped=selection.dropped, dropped_nearest_m=selection.dropped_nearest_m,
             command_clipped=clipped, waiting="" if stop is None else stop.reason,
-            blocked_at_m=None if stop is None else stop.blocked_at_m)
+            blocked_at_m=None if stop is None else stop.blocked_at_m,
+            vessels=() if vessel_sel is None else vessel_sel.ids,
+            vessels_dropped=0 if vessel_sel is None else vessel_sel.dropped,
+            rules="" if rules is None else rules.reason)
         return NmpcStep(command, rates, states[:, :NX_BOAT].copy(), inputs[:, :2].copy(),
                         states[1:, NX - 1].copy(), reference, stats)

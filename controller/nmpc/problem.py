@@ -32,7 +32,8 @@ leaves open, and why:
   flag that multiplies its constraint: the problem is built (and compiled) once.
 
 Everything that changes at run time is a parameter of the problem: the boat parameters, the
-current, the reference, the segments, R_b and d_p. Structure (Np, Ts, RK4 sub-steps, number of
+current and the model-error bias (as `water_estimator` estimates them), the reference, the
+segments, R_b and d_p. Structure (Np, Ts, RK4 sub-steps, number of
 slots) is fixed when the problem is built.
 """
 
@@ -50,6 +51,7 @@ from ..model import SMOOTH, Variant, augmented_ode, rk4
 from .obstacle import hull_circle_centres, super_ellipse_margin
 from ..params import IDENTIFIED, PARAM_NAMES, BoatParams
 from .segment_slots import SLOT_FIELDS
+from .vessel_slots import VESSEL_FIELDS
 
 NX_BOAT = 8  # [x, y, psi, u, v, r, nT, nS]
 NX = 9  # plus the slack of the stage
@@ -81,6 +83,11 @@ class NmpcConfig:
     min_half_axis_m: float = 0.1  # the slack may shrink R_b + d_p down to this
     segment_slots: int = 16
     segment_range_m: float = 50.0  # segments farther than this are left out
+    vessel_slots: int = 4  # other vessels avoided over the horizon (`vessel_slots`)
+    vessel_separation_m: float = 2.0  # d_v: kept beyond R_b from a vessel's (inflated) hull
+    colreg: bool = True  # shape the reference by the rules of the road (`seamanship`)
+    follow_gap_m: float = 20.0  # behind a vessel there is no room to overtake: bow to its stern
+    bow_m: float = 3.95  # from the boat's origin to its bow (the 7.9 m hull)
     smooth_eps: float = SMOOTH.eps  # of the smooth |z| in the prediction model
     hessian_regularisation: float = 1e-6  # on zero diagonal weights (v, nT, nS, sigma)
     # A blocked way or blind perception (`passage`): the reference stops the boat.
@@ -102,7 +109,7 @@ class NmpcConfig:
                 value = tuple(np.asarray(value).reshape(-1).tolist())  # weights as a list
                 object.__setattr__(self, f.name, value)
             values = value if isinstance(value, tuple) else (value,)
-            if f.name in ("boat", "terminal_factor") or value is None:
+            if f.name in ("boat", "terminal_factor", "colreg") or value is None:
                 continue
             if any(not isinstance(v, numbers.Real) or isinstance(v, (bool, np.bool_))
                    for v in values):
@@ -120,7 +127,8 @@ class NmpcConfig:
             math.isfinite(self.terminal_factor) and self.terminal_factor >= 0
         ):
             bad("terminal_factor", "must be a non-negative number or None")
-        for name in ("slack_weight", "separation_m", "hessian_regularisation"):
+        for name in ("slack_weight", "separation_m", "hessian_regularisation",
+                     "vessel_separation_m"):
             if getattr(self, name) < 0:
                 bad(name, "must not be negative")
         for name in ("stop_margin_m", "resume_after_s"):
@@ -134,6 +142,8 @@ class NmpcConfig:
         for name in ("horizon", "rk4_substeps", "segment_slots"):
             if int(getattr(self, name)) != getattr(self, name) or getattr(self, name) < 1:
                 bad(name, "must be a positive integer")
+        if int(self.vessel_slots) != self.vessel_slots or self.vessel_slots < 0:
+            bad("vessel_slots", "must be a whole number >= 0")
         if self.control_period_s > self.step_s:
             bad("control_period_s", "must not exceed step_s")
         if self.min_half_axis_m >= self.hull_radius_m + self.separation_m:
@@ -176,6 +186,12 @@ class ParamLayout:
     """Where each runtime parameter sits in the problem's parameter vector."""
 
     n_slots: int
+    n_vessels: int = 0  # vessel slots
+    horizon: int = 25  # stages 1..horizon each have their own vessel slots
+
+    @classmethod
+    def of(cls, config: "NmpcConfig") -> "ParamLayout":
+        return cls(config.segment_slots, config.vessel_slots, config.horizon)
 
     @property
     def boat(self) -> slice:  # model parameters, PARAM_NAMES order
@@ -186,28 +202,43 @@ class ParamLayout:
         return slice(_NP, _NP + 2)
 
     @property
-    def geometry(self) -> slice:  # [R_b, d_p, offset_front, offset_back]
-        return slice(_NP + 2, _NP + 6)
+    def geometry(self) -> slice:  # [R_b, d_p, offset_front, offset_back, d_v]
+        return slice(_NP + 2, _NP + 7)
+
+    @property
+    def bias(self) -> slice:  # [b_u, b_v, b_r]: the model error's body-frame acceleration
+        return slice(_NP + 7, _NP + 10)
 
     @property
     def segments(self) -> slice:  # n_slots x SLOT_FIELDS, row-major
-        start = _NP + 6
+        start = _NP + 10
         return slice(start, start + self.n_slots * len(SLOT_FIELDS))
 
     @property
+    def vessels(self) -> slice:  # stage 1..N: n_vessels x VESSEL_FIELDS each, row-major
+        start = self.segments.stop
+        return slice(start, start + self.horizon * self.n_vessels * len(VESSEL_FIELDS))
+
+    @property
     def size(self) -> int:
-        return self.segments.stop
+        return self.vessels.stop
 
 
 def pack_params(config: NmpcConfig, segment_slots: np.ndarray, current=(0.0, 0.0),
-                boat: BoatParams | None = None) -> np.ndarray:
-    """The problem's parameter vector from its parts (segment slots as (n_slots, 5))."""
-    layout = ParamLayout(config.segment_slots)
-    p = np.empty(layout.size)
+                boat: BoatParams | None = None, bias=(0.0, 0.0, 0.0),
+                vessel_slots: np.ndarray | None = None) -> np.ndarray:
+    """The problem's parameter vector from its parts (segment slots as (n_slots, 5), vessel
+    slots as (horizon, n_vessels, 6); none: all inactive)."""
+    layout = ParamLayout.of(config)
+    p = np.zeros(layout.size)
     p[layout.boat] = (boat or config.boat).as_vector()
     p[layout.current] = current
-    p[layout.geometry] = (config.hull_radius_m, config.separation_m, *config.hull_offsets_m)
+    p[layout.geometry] = (config.hull_radius_m, config.separation_m, *config.hull_offsets_m,
+                          config.vessel_separation_m)
+    p[layout.bias] = bias
     p[layout.segments] = np.asarray(segment_slots, float).reshape(-1)
+    if vessel_slots is not None:
+        p[layout.vessels] = np.asarray(vessel_slots, float).reshape(-1)
     return p
 
 
@@ -219,33 +250,46 @@ def dynamics_function(config: NmpcConfig) -> ca.Function:
     u = ca.SX.sym("u", NU)
     p = ca.SX.sym("p", _NP)
     current = ca.SX.sym("current", 2)
+    bias = ca.SX.sym("bias", 3)
     variant = Variant(smooth=True, eps=config.smooth_eps)
-    boat = rk4(lambda z: augmented_ode(z, u[:2], p, current, variant), x[:NX_BOAT],
+    boat = rk4(lambda z: augmented_ode(z, u[:2], p, current, variant, bias), x[:NX_BOAT],
                config.step_s, config.rk4_substeps)
-    return ca.Function("f_d", [x, u, p, current], [ca.vertcat(boat, u[2])],
-                       ["x", "u", "p", "current"], ["x_next"])
+    return ca.Function("f_d", [x, u, p, current, bias], [ca.vertcat(boat, u[2])],
+                       ["x", "u", "p", "current", "bias"], ["x_next"])
 
 
 def clearance_function(config: NmpcConfig) -> ca.Function:
-    """h >= 0 for each hull circle and segment slot at one stage (eq. mpc:pnorm, 4th root).
+    """h >= 0 for each hull circle and segment slot, then each vessel slot, at one stage
+    (eq. mpc:pnorm, 4th root).
 
     Slot = (x_c, y_c, theta, length, active); an inactive slot gives h = 1: strictly satisfied, so
-    an interior-point QP solver never sees a degenerate active row.
+    an interior-point QP solver never sees a degenerate active row. A vessel slot is the
+    vessel as predicted for this stage, (x, y, theta, length, width, active), its hull
+    inflated by its uncertainty; the super-ellipse around it has half axes
+    length/2 + R_b + d_v + s and width/2 + R_b + d_v + s: the same slack s softens it.
     """
     x = ca.SX.sym("x", NX)
     slots = ca.SX.sym("slots", len(SLOT_FIELDS), config.segment_slots)  # a column per slot
-    geometry = ca.SX.sym("geometry", 4)  # R_b, d_p, offsets
-    Rb, dp = geometry[0], geometry[1]
+    geometry = ca.SX.sym("geometry", 5)  # R_b, d_p, offsets, d_v
+    vessels = ca.SX.sym("vessels", len(VESSEL_FIELDS), config.vessel_slots)
+    Rb, dp, dv = geometry[0], geometry[1], geometry[4]
     s = x[NX - 1]
     h = []
-    for px, py in hull_circle_centres(x[0], x[1], x[2], [geometry[2], geometry[3]]):
+    circles = hull_circle_centres(x[0], x[1], x[2], [geometry[2], geometry[3]])
+    for px, py in circles:
         for j in range(config.segment_slots):
             xc, yc, th, length, active = (slots[k, j] for k in range(len(SLOT_FIELDS)))
             margin = Rb + dp + s  # the slack softens the separation all round, ends included
             h.append(active * super_ellipse_margin(px, py, xc, yc, th, length, margin, margin)
                      + (1 - active))
-    return ca.Function("clearance", [x, slots, geometry], [ca.vertcat(*h)],
-                       ["x", "slots", "geometry"], ["h"])
+    for px, py in circles:
+        for j in range(config.vessel_slots):
+            xv, yv, th, length, width, active = (vessels[k, j] for k in range(len(VESSEL_FIELDS)))
+            margin = Rb + dv + s
+            h.append(active * super_ellipse_margin(px, py, xv, yv, th, length, margin,
+                                                   width / 2 + margin) + (1 - active))
+    return ca.Function("clearance", [x, slots, geometry, vessels], [ca.vertcat(*h)],
+                       ["x", "slots", "geometry", "vessels"], ["h"])
 
 
 @dataclass(frozen=True)
@@ -375,7 +419,7 @@ def _stage_blocks(sparsity: ca.Sparsity, row0: int, col0: int, src0: int):
 def build_ocp(config: NmpcConfig) -> Ocp:
     """Variables, dynamics, constraints and their Jacobian, as CasADi Functions of (w, p)."""
     N = config.horizon
-    layout = ParamLayout(config.segment_slots)
+    layout = ParamLayout.of(config)
     nz = NX + NU  # variables per stage
     nw = N * nz + NX
     w = ca.MX.sym("w", nw)
@@ -389,19 +433,21 @@ def build_ocp(config: NmpcConfig) -> Ocp:
     # dynamics, and its Jacobian with respect to [x_k; u_k]
     f_d = dynamics_function(config)
     f_d_jac, sp_dyn = _with_jacobian(f_d, [0, 1])
-    boat, current = p[layout.boat], p[layout.current]
-    X_next, AB = f_d_jac.map(N)(X[:, :N], U, ca.repmat(boat, 1, N), ca.repmat(current, 1, N))
+    boat, current, bias = p[layout.boat], p[layout.current], p[layout.bias]
+    X_next, AB = f_d_jac.map(N)(X[:, :N], U, ca.repmat(boat, 1, N), ca.repmat(current, 1, N),
+                                ca.repmat(bias, 1, N))
     gaps = X_next - X[:, 1:]  # NX x N: x_{k+1} = f_d(x_k, u_k) as gap_k = 0
 
     # obstacle constraints at stages 1..N, and their Jacobian with respect to x_k
     clearance = clearance_function(config)
     clearance_jac, sp_h = _with_jacobian(clearance, [0])
     slots = ca.reshape(p[layout.segments], len(SLOT_FIELDS), config.segment_slots)
+    vessels = ca.reshape(p[layout.vessels], len(VESSEL_FIELDS), config.vessel_slots * N)
     H, C = clearance_jac.map(N)(X[:, 1:], ca.repmat(slots, 1, N),
-                                ca.repmat(p[layout.geometry], 1, N))  # n_h x N
+                                ca.repmat(p[layout.geometry], 1, N), vessels)  # n_h x N
 
     # rows in hpipm's stage order: gap_0, then (gap_k, h_k) for k = 1..N-1, then h_N
-    n_h = 2 * config.segment_slots
+    n_h = 2 * (config.segment_slots + config.vessel_slots)
     g = ca.vertcat(gaps[:, 0], ca.vec(ca.vertcat(gaps[:, 1:], H[:, : N - 1])), H[:, N - 1])
 
     # where each nonzero of dg/dw comes from: [A_k B_k] and -I per gap, C_k per stage

@@ -123,13 +123,20 @@ def waypoint_path(waypoints) -> WaypointPath:
 def reference_trajectory(path: WaypointPath, position, heading_rad: float, speed_mps: float,
                          horizon: int, step_s: float, progress_m: float = 0.0,
                          search_ahead_m: float | None = None, stop_at_m: float | None = None,
-                         decel_mps2: float = 0.15) -> Reference:
+                         decel_mps2: float = 0.15, current=(0.0, 0.0),
+                         offset_m: float = 0.0) -> Reference:
     """r_0..r_horizon for a boat at `position` with `heading_rad`.
 
     The closest point is searched on arc lengths [progress_m, progress_m + search_ahead_m]
     (the whole rest of the path if None): forward only, so the reference never runs back.
     With `stop_at_m` (an arc length: a blocked way ahead) the reference slows at `decel_mps2`
     so that it comes to rest there, and holds there; one already past it holds where it is.
+    With a `current` (north, east, m/s) the reference heading is the one that keeps the
+    course on the path: the leg's direction turned into the current by the crab angle
+    asin(V_across / u_water), as a helmsman holds a boat on a line across a stream; without
+    it, the heading weight would pull the boat off its line to hold the leg's direction.
+    `offset_m` moves the reference across the path (+ to starboard), as the rules of the road
+    ask when meeting or overtaking another vessel (`seamanship`).
     """
     speed_mps = finite_number(speed_mps, "target speed")
     if speed_mps < 0:
@@ -143,6 +150,14 @@ def reference_trajectory(path: WaypointPath, position, heading_rad: float, speed
     else:
         s, speed = _stopping(s0, speed_mps, stop_at_m, decel_mps2, t)
     xy, psi = path.at(s)  # leg headings, already continuous along the path
+    if offset_m:
+        xy = xy + offset_m * np.column_stack([-np.sin(psi), np.cos(psi)])
+    vn, ve = float(current[0]), float(current[1])
+    if vn or ve:
+        across = -vn * np.sin(psi) + ve * np.cos(psi)  # to starboard of the leg
+        along = vn * np.cos(psi) + ve * np.sin(psi)
+        water = np.maximum(speed - along, 0.5)  # the boat's speed through the water
+        psi = psi - np.arcsin(np.clip(across / water, -0.7, 0.7))  # at most ~45 deg of crab
     psi = psi + (unwrap_near(psi[0], heading_rad) - psi[0])  # the turn nearest the boat's
     states = np.zeros((horizon + 1, 8))
     states[:, 0:2], states[:, 2] = xy, psi

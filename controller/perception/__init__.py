@@ -8,7 +8,8 @@ short while and then says the boat is blind.
 
 from .cleaning import CleaningConfig, clean_segments
 from .detection import DetectionConfig, detect_segments
-from .feed import FeedConfig, PerceptionView, SegmentFeed
+from .feed import FeedConfig, Percept, PerceptionView, SegmentFeed
 
-__all__ = ["CleaningConfig", "DetectionConfig", "FeedConfig", "PerceptionView", "SegmentFeed",
+__all__ = ["CleaningConfig", "DetectionConfig", "FeedConfig", "Percept", "PerceptionView",
+           "SegmentFeed",
            "clean_segments", "detect_segments"]

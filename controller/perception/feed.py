@@ -34,14 +34,23 @@ class FeedConfig:
 
 
 @dataclass(frozen=True)
+class Percept:
+    """What one scan gave: the static wall segments and the tracks of other vessels."""
+
+    segments: np.ndarray  # (M, 4) rows (x_c, y_c, theta, length)
+    tracks: tuple = ()  # perception.tracking.Track (or the truth in the same form)
+
+
+@dataclass(frozen=True)
 class PerceptionView:
-    """One period's segments for the controller, and how they came about."""
+    """One period's segments and vessel tracks for the controller, and how they came about."""
 
     segments: np.ndarray  # (M, 4) rows (x_c, y_c, theta, length), cleaned
     fresh: bool  # they come from a scan delivered this period
     age_s: float  # time since the scan they come from was delivered (inf: never a scan)
     blind: bool  # no usable scan for longer than max_age_s: slow to a stop
     dropped: dict  # rows cleaned away this period, by reason (cleaning.DROP_REASONS)
+    tracks: tuple = ()  # vessel tracks, carried forward at their velocity over `age_s`
 
 
 class SegmentFeed:
@@ -50,14 +59,19 @@ class SegmentFeed:
     def __init__(self, config: FeedConfig = FeedConfig()):
         self.config = config
         self._last = np.zeros((0, 4))
+        self._last_tracks: tuple = ()
         self._last_time: float | None = None
         self.dropped_total = dict.fromkeys(DROP_REASONS, 0)  # over the run
         self.missing_scans = 0  # periods with no usable scan
         self.blind_periods = 0
 
     def update(self, time_s: float, segments, position=None) -> PerceptionView:
-        """This period's view. `segments`: the detections of a scan just delivered, or None
-        when there was no scan (missing or empty). `position` (x, y) for the range check."""
+        """This period's view. `segments`: the detections of a scan just delivered (an (M, 4)
+        array, or a `Percept` with vessel tracks), or None when there was no scan (missing or
+        empty). `position` (x, y) for the range check."""
+        tracks = None
+        if isinstance(segments, Percept):
+            segments, tracks = segments.segments, tuple(segments.tracks)
         if segments is None:
             cleaned, dropped = None, dict.fromkeys(DROP_REASONS, 0)
         else:
@@ -68,11 +82,22 @@ class SegmentFeed:
             self.dropped_total[k] += n
         if cleaned is not None:
             self._last, self._last_time = cleaned, float(time_s)
-            return PerceptionView(cleaned, True, 0.0, False, dropped)
+            self._last_tracks = tracks if tracks is not None else ()
+            return PerceptionView(cleaned, True, 0.0, False, dropped, self._last_tracks)
         self.missing_scans += 1
         age = math.inf if self._last_time is None else float(time_s) - self._last_time
         blind = age > self.config.max_age_s
         self.blind_periods += blind
         # The last segments stay the constraints even when blind: they are in the inertial
-        # frame, so they still mark where the walls were while the boat slows down.
-        return PerceptionView(self._last, False, age, blind, dropped)
+        # frame, so they still mark where the walls were while the boat slows down. Vessels
+        # move on: their tracks are carried forward at their velocity.
+        tracks = tuple(_carried(tr, age) for tr in self._last_tracks) if math.isfinite(age) else ()
+        return PerceptionView(self._last, False, age, blind, dropped, tracks)
+
+
+def _carried(track, age_s: float):
+    """A track moved on at its velocity over `age_s` (a dataclass: `dataclasses.replace`)."""
+    from dataclasses import replace
+
+    p = np.asarray(track.position, float) + age_s * np.asarray(track.velocity, float)
+    return replace(track, position=p)

@@ -26,6 +26,7 @@ from controller.geometry import Polyline
 from controller.navigation import NavigationFilter
 from controller.perception.feed import FeedConfig, SegmentFeed
 from scenarios.results import metrics
+from scenarios.results.encounters import EncounterWatch, TrackingWatch
 from scenarios.plants.plant import Plant, PlantFailure, PlantOutput
 from scenarios.loop.run_log import RunLog
 from scenarios.sensors.gps_ahrs import AhrsConfig, AhrsSensor, GpsConfig, GpsSensor
@@ -78,6 +79,9 @@ class LoopConfig:
     obstacles: tuple = ()  # metrics.WatchedObstacle: per-obstacle clearance and detection
     lidar_outages_s: tuple = ()  # (start, end) spans of simulation time with no scan
     feed: FeedConfig = FeedConfig()  # how long the last segments bridge missing scans
+    current_field: object = None  # scenarios.world.current.CurrentField; None: current_ne
+    vessels: tuple = ()  # scenarios.world.vessels.Vessel: other boats, for the metrics
+    target_speed_mps: float = 2.0  # "steady running" for the water metrics: near this speed
 
 
 @dataclass
@@ -86,6 +90,7 @@ class Snapshot:
     state: np.ndarray
     predicted: np.ndarray | None
     segments: np.ndarray
+    tracks: list = field(default_factory=list)  # [x, y, heading, length, width] per track
 
 
 @dataclass
@@ -132,6 +137,9 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
     command = np.zeros(2)
     rows_t, rows_clear, rows_cmd, rows_xt, solve_s = [], [], [], [], []
     rows_waiting, rows_speed = [], []
+    rows_water: list[tuple] = []  # (time, true current N, E, estimated N, E) per step
+    field = cfg.current_field
+    varying = field is not None and field.varies
     snapshots: list[Snapshot] = []
     status, reached = "time limit", False
     world = _ChangingOutlines(cfg)
@@ -141,7 +149,11 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
     collided = False
     fallback_steps = 0
     waiting_before = ""
-    takes_blind = "blind" in inspect.signature(controller.step).parameters
+    takes = inspect.signature(controller.step).parameters
+    takes_blind, takes_vessels = "blind" in takes, "vessels" in takes
+    encounters = EncounterWatch(cfg.vessels)
+    tracking = TrackingWatch(cfg.vessels)
+    perceive = getattr(perception, "perceive", None) or perception.segments
     wall0 = time.perf_counter()
     with RunLog(out_dir / "log.csv", out_dir / "segments.csv") as log:
         imu_k = 0
@@ -150,19 +162,26 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
             est = nav.state if own_estimate else np.asarray(out.estimate, float)
             outlines, contact, canal_width = world.at(t)
             t0 = time.perf_counter()
-            found = perception.segments(t, out.state, est)
+            found = perceive(t, out.state, est)
             if any(a <= t < b for a, b in cfg.lidar_outages_s):
                 found = None  # the scan is lost (a configured outage)
             view = feed.update(t, found, est[:2])
             segs = view.segments
             t1 = time.perf_counter()
-            if takes_blind:
-                decision = controller.step(t, est, out.actuators.copy(), segs, blind=view.blind)
-            else:  # a controller of the older interface: it knows no blindness
-                decision = controller.step(t, est, out.actuators.copy(), segs)
+            extra = {}  # what the controller takes: a controller of the older interface knows
+            if takes_blind:  # neither blindness nor other vessels
+                extra["blind"] = view.blind
+            if takes_vessels:
+                extra["vessels"] = view.tracks
+            decision = controller.step(t, est, out.actuators.copy(), segs, **extra)
             t2 = time.perf_counter()
             timer.add("perception", t1 - t0)
             timer.add("controller", t2 - t1)
+            estimator_s = decision.stats.get("estimator_s")
+            if estimator_s is not None:
+                timer.add("water_estimator", estimator_s)  # (part of the controller's time)
+            true_current = field.at(out.state[:2]) if field is not None else np.asarray(
+                cfg.current_ne, float)
             solve_s.append(t2 - t1)
             if not decision.ok:
                 status = f"controller failed: {decision.status}"
@@ -174,13 +193,24 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
             clear = metrics.clearance(out.state[None, :3], outlines)[0]
             xt = path.cross_track(out.state[:2])
             width = canal_width.at(out.state)
+            if cfg.vessels:  # other vessels count for clearance where they are now
+                hulls = [v.outline_at(t) for v in cfg.vessels]
+                ring = [np.vstack([h, h[:1]]) for h in hulls]
+                clear = np.minimum(clear, metrics.clearance(out.state[None, :3], ring)[0])
+            vessel_gap = encounters.update(t, out.state, width[2])
+            if view.tracks or cfg.vessels:
+                tracking.update(t, out.state, view.tracks, cfg.control_period_s)
+                log.write_tracks(t, view.tracks, [(v.name, v.pose_at(t)) for v in cfg.vessels])
             watch.update(t, out.state, segs)
             waiting = str(decision.stats.get("waiting", ""))
             fallback_steps += bool(decision.stats.get("fallback", ""))
             log.write_step(
                 t, out.state, est, command, rate, out.actuators, clear, xt,
-                (t2 - t1) * 1e3, decision, segs, width, view,
+                (t2 - t1) * 1e3, decision, segs, width, view, true_current,
             )
+            water = decision.stats.get("water")
+            if water is not None:
+                rows_water.append((t, *true_current, *water.current_ne, out.state[3]))
             why = waiting.split(" at ")[0].split(":")[0]  # "way blocked", "blind", ""
             if events is not None and why != waiting_before:
                 events(t, f"waiting: {waiting}" if waiting else "the way is clear: going on")
@@ -193,12 +223,20 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
             rows_cmd.append(command)
             rows_xt.append(xt)
             if k in snapshot_steps:
-                snapshots.append(Snapshot(t, out.state.copy(), decision.predicted, segs))
+                snapshots.append(Snapshot(t, out.state.copy(), decision.predicted, segs, [
+                    [*map(float, tr.position), float(tr.heading_rad), float(tr.length_m),
+                     float(tr.width_m)] for tr in view.tracks]))
             if not decision.ok:
                 break
             if min(clear) <= contact.reach_m and contact.touches(out.state):
                 status, collided = f"collision at t = {t:.1f} s", True
                 break
+            if vessel_gap <= 0.0:
+                hit = cfg.vessels[int(np.argmin(encounters.min_distance))].name
+                status, collided = f"collision with vessel {hit!r} at t = {t:.1f} s", True
+                break
+            if varying:
+                plant.set_current(true_current)
             try:
                 for _ in range(n_imu):
                     ta = time.perf_counter()
@@ -263,6 +301,14 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
     summary.update({k: _round(v) for k, v in by_place.items()})
     if cfg.obstacles:
         summary["obstacles"] = watch.summary()
+    if cfg.vessels:
+        summary["vessels"] = encounters.summary(cfg.control_period_s)
+        summary["tracking"] = tracking.summary()
+    if rows_water:
+        summary["water"] = {"mode": getattr(controller, "water", None),
+                            **{k: _round(v) if isinstance(v, float) else v
+                               for k, v in metrics.water_estimate(
+                                   np.array(rows_water), cfg.target_speed_mps).items()}}
     stats = metrics.TimingStats.of(solve_s)
     timing = {
         "controller": summary["controller"],
@@ -281,7 +327,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
     (out_dir / "snapshots.json").write_text(json.dumps([
         {"time_s": sn.time_s, "state": sn.state.tolist(),
          "predicted": None if sn.predicted is None else np.asarray(sn.predicted).tolist(),
-         "segments": np.asarray(sn.segments).tolist()}
+         "segments": np.asarray(sn.segments).tolist(), "tracks": sn.tracks}
         for sn in snapshots
     ]) + "\n")
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")

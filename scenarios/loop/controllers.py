@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from controller.baselines.los_pid import LosPidConfig, LosPidTracker
@@ -32,8 +34,11 @@ class NmpcController:
     """The paper's NMPC (controller.nmpc.NmpcController) on the scenario's waypoints and d_p.
 
     `[controller.options]` of the scenario sets `NmpcConfig` fields by name, plus `method`
-    (rti | sqp | ipopt) and `knows_current` (default false: the boat does not know the water
-    current; it feels it through the estimated state, as a real one would).
+    (rti | sqp | ipopt) and `water`: what the NMPC knows of the current and the model's error,
+    "estimated" (default: `controller.water_estimator` on the state estimate and the
+    actuators, as a real boat must), "still" (nothing: the paper's NMPC) or "true" (the
+    scenario's current, as from a current meter; `knows_current = true` is its older name).
+    The estimator runs in every mode, so its estimate is logged beside the truth.
     """
 
     name = "nmpc"
@@ -42,12 +47,15 @@ class NmpcController:
         from dataclasses import fields
 
         from controller.errors import InputError
-        from controller.nmpc.problem import NmpcConfig
         from controller.nmpc.controller import NmpcController as Core
+        from controller.nmpc.problem import NmpcConfig
+        from controller.water_estimator import WaterEstimator, WaterEstimatorConfig
 
         options = dict(scenario.controller_options)
         method = options.pop("method", "rti")
-        self._knows_current = bool(options.pop("knows_current", False))
+        knows = options.pop("knows_current", None)
+        water = options.pop("water", None)
+        self.water = water or ("estimated" if knows is None else "true" if knows else "still")
         known = {f.name for f in fields(NmpcConfig)} - {"boat", "separation_m"}
         for key in options:
             if key not in known:
@@ -59,21 +67,34 @@ class NmpcController:
         self.name = "nmpc" if method == "rti" else f"nmpc-{method}"
         self._waypoints = scenario.waypoints
         self._speed = scenario.target_speed_mps
-        self._current = scenario.current_ne if self._knows_current else (0.0, 0.0)
+        self._field = scenario.current_field
+        self.estimator = WaterEstimator(WaterEstimatorConfig(
+            period_s=config.control_period_s, boat=scenario.controller_params))
 
-    def step(self, time_s, state, actuators, segments, blind=False) -> Decision:
+    def step(self, time_s, state, actuators, segments, blind=False, vessels=()) -> Decision:
         from controller.errors import SolverError
 
+        t0 = time.perf_counter()
+        water = self.estimator.update(state, actuators)
+        estimator_s = time.perf_counter() - t0
+        if self.water == "estimated":
+            current, bias = water.current_ne, water.bias
+        elif self.water == "true":
+            current, bias = self._field.at(np.asarray(state)[:2]), (0.0, 0.0, 0.0)
+        else:
+            current, bias = (0.0, 0.0), (0.0, 0.0, 0.0)
         try:
             st = self.core.step(state, actuators, segments, self._waypoints, self._speed,
-                                self._current, blind=blind)
+                                current, blind=blind, bias=bias, vessels=vessels)
         except SolverError as exc:
-            return Decision(command=np.zeros(2), ok=False, status=str(exc))
+            return Decision(command=np.zeros(2), ok=False, status=str(exc),
+                            stats={"water": water, "estimator_s": estimator_s})
         return Decision(
             command=st.command, status=_status(st), predicted=st.states,
             slack_m=st.max_slack_m, segments_used=segments,
             stats={"qp_iterations": st.stats.qp_iterations, "fallback": st.stats.fallback,
-                   "segments_dropped": st.stats.segments_dropped, "waiting": st.stats.waiting},
+                   "segments_dropped": st.stats.segments_dropped, "waiting": st.stats.waiting,
+                   "water": water, "estimator_s": estimator_s, "rules": st.stats.rules},
         )
 
 

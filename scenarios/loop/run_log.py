@@ -19,9 +19,15 @@ LOG_COLUMNS = (
     + ("nT_cmd_pct", "nS_cmd_pct", "dnT_pctps", "dnS_pctps", "nT_actual_pct", "nS_actual_pct",
        "clearance_bow_m", "clearance_stern_m", "cross_track_m", "canal_width_m",
        "canal_width_min_hull_m", "centre_offset_m", "solve_ms", "segments", "segments_dropped",
-       "segments_cleaned", "perception_age_s", "blind", "slack_m", "status")
+       "segments_cleaned", "perception_age_s", "blind", "slack_m", "status",
+       "current_true_n_mps", "current_true_e_mps", "current_est_n_mps", "current_est_e_mps",
+       "current_sigma_n_mps", "current_sigma_e_mps", "bias_u_mps2", "bias_v_mps2",
+       "bias_r_radps2", "tracks", "rules")
 )
 SEGMENT_COLUMNS = ("time_s", "x_c_m", "y_c_m", "theta_rad", "length_m")
+TRACK_COLUMNS = ("time_s", "id", "x_m", "y_m", "v_north_mps", "v_east_mps", "heading_rad",
+                 "length_m", "width_m", "moving", "sigma_position_m")
+VESSEL_COLUMNS = ("time_s", "name", "x_m", "y_m", "psi_rad")
 
 
 class RunLog:
@@ -29,6 +35,7 @@ class RunLog:
 
     def __init__(self, log_path: Path, segments_path: Path):
         self._paths = (Path(log_path), Path(segments_path))
+        self._tracks = None  # tracks.csv and vessels.csv, opened at the first vessel
 
     def __enter__(self) -> "RunLog":
         self._fh = self._paths[0].open("w", newline="")
@@ -41,10 +48,11 @@ class RunLog:
 
     def write_step(self, t, true_state, est_state, command, rate, actuators, clearance,
                    cross_track, solve_ms, decision, segments, width=(np.inf, np.inf, 0.0),
-                   view=None) -> None:
+                   view=None, current=(0.0, 0.0)) -> None:
         """One control step; `width` is (canal width at the boat, smallest over the hull
         circles, offset from the middle), `metrics.CanalWidth.at`; `view` the perception
-        feed's `PerceptionView` (rows cleaned away, age of the segments, blind)."""
+        feed's `PerceptionView` (rows cleaned away, age of the segments, blind); `current`
+        the true current at the boat (the estimate comes with the decision's stats)."""
         row = [f"{t:.3f}"]
         row += [repr(float(v)) for v in true_state]
         row += [repr(float(v)) for v in est_state]
@@ -55,12 +63,42 @@ class RunLog:
         blind = int(view.blind) if view is not None else 0
         row += [f"{solve_ms:.3f}", len(segments), int(decision.stats.get("segments_dropped", 0)),
                 cleaned, f"{age:.3f}", blind, repr(float(decision.slack_m)), decision.status]
+        row += [repr(float(v)) for v in current]
+        water = decision.stats.get("water")  # the controller's water estimate, if it has one
+        if water is None:
+            row += [""] * 7
+        else:
+            row += [repr(float(v)) for v in (*water.current_ne, *water.current_sigma, *water.bias)]
+        row += [len(view.tracks) if view is not None else 0, decision.stats.get("rules", "")]
         self._w.writerow(row)
         for s in np.asarray(segments, float).reshape(-1, 4):
             self._sw.writerow([f"{t:.3f}", *(repr(float(v)) for v in s)])
         self._fh.flush()
         self._sfh.flush()
 
+    def write_tracks(self, t, tracks, vessels) -> None:
+        """The vessel tracks the controller saw (tracks.csv) and the true vessels
+        (vessels.csv, (name, pose) pairs) at this step."""
+        if self._tracks is None:
+            folder = self._paths[0].parent
+            self._tracks = [(folder / name).open("w", newline="")
+                            for name in ("tracks.csv", "vessels.csv")]
+            self._tw = [csv.writer(f) for f in self._tracks]
+            self._tw[0].writerow(TRACK_COLUMNS)
+            self._tw[1].writerow(VESSEL_COLUMNS)
+        for tr in tracks:
+            cov = np.asarray(tr.covariance, float).reshape(4, 4)
+            self._tw[0].writerow([f"{t:.3f}", tr.id, *(repr(float(v)) for v in (
+                *tr.position, *tr.velocity, tr.heading_rad, tr.length_m, tr.width_m)),
+                int(bool(getattr(tr, "moving", True))),
+                repr(float(np.sqrt(max(0.5 * (cov[0, 0] + cov[1, 1]), 0.0))))])
+        for name, pose in vessels:
+            self._tw[1].writerow([f"{t:.3f}", name, *(repr(float(v)) for v in pose)])
+        for f in self._tracks:
+            f.flush()
+
     def __exit__(self, *exc) -> None:
         self._fh.close()
         self._sfh.close()
+        for f in self._tracks or ():
+            f.close()

@@ -102,7 +102,21 @@ def loop_config(scenario: Scenario, seed: int) -> LoopConfig:
         snapshot_times_s=scenario.snapshot_times_s or _default_snapshots(scenario),
         lidar_outages_s=scenario.lidar_outages_s,
         feed=FeedConfig(max_age_s=scenario.max_scan_age_s),
+        current_field=scenario.current_field, target_speed_mps=scenario.target_speed_mps,
+        vessels=world.vessels,
     )
+
+
+def with_water(scenario: Scenario, water: str) -> Scenario:
+    """The scenario with the NMPC's knowledge of the water set to `water` (WATER_MODES)."""
+    from dataclasses import replace
+
+    from scenarios.scenario_file import WATER_MODES
+
+    if water not in WATER_MODES:
+        raise InputError(f"water {water!r}: choose one of {', '.join(WATER_MODES)}")
+    options = {k: v for k, v in scenario.controller_options.items() if k != "knows_current"}
+    return replace(scenario, controller_options={**options, "water": water})
 
 
 def run_scenario(scenario: Scenario, out_dir: Path, controller: str | None = None,
@@ -114,6 +128,10 @@ def run_scenario(scenario: Scenario, out_dir: Path, controller: str | None = Non
     hears when the controller starts or stops waiting."""
     if plant not in PLANTS:
         raise InputError(f"plant {plant!r} is not available (choose from: {', '.join(PLANTS)})")
+    if scenario.current_profile is not None and plant not in ("fmu", "python-model"):
+        raise InputError(f"{scenario.path or scenario.name}: field 'current.profile': a current "
+                         f"that changes along the canal needs the fmu or python-model plant, "
+                         f"not {plant}")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     seed = scenario.seed if seed is None else seed
@@ -141,7 +159,7 @@ def run_scenario(scenario: Scenario, out_dir: Path, controller: str | None = Non
 
         title = f"{scenario.name}: {result.summary['controller']}"
         p.plot_trajectory(out_dir, scenario.world.surfaces(AIR_DRAFT_M), scenario.waypoints,
-                          out_dir / "trajectory.png", title)
+                          out_dir / "trajectory.png", title, vessels=scenario.world.vessels)
         p.plot_separation({result.summary["controller"]: out_dir}, cfg.desired_separation_m,
                           out_dir / "separation.png", title)
         p.plot_states(out_dir, out_dir / "states.png", title)
@@ -203,6 +221,19 @@ def check_criteria(scenario: Scenario, summary: dict) -> list[str]:
     if c.max_speed_while_held_mps is not None and held is not None \
             and held > c.max_speed_while_held_mps:
         failed.append(f"speed while held {held} m/s > {c.max_speed_while_held_mps} m/s")
+    for v in s.get("vessels", []):
+        d = v["min_hull_distance_m"]
+        if c.min_vessel_distance_m is not None and (d is None or d < c.min_vessel_distance_m):
+            failed.append(f"vessel {v['name']!r} came within {d} m hull to hull "
+                          f"(< {c.min_vessel_distance_m} m)")
+        if c.vessels_passed_on is not None and v["passed_on"] != c.vessels_passed_on:
+            failed.append(f"vessel {v['name']!r} was passed on the boat's {v['passed_on']} "
+                          f"side, not {c.vessels_passed_on}")
+        share = v["starboard_half_while_meeting"]
+        if c.min_starboard_half_while_meeting is not None and share is not None \
+                and share < c.min_starboard_half_while_meeting:
+            failed.append(f"in the starboard half {share:.0%} of the time meeting vessel "
+                          f"{v['name']!r} (< {c.min_starboard_half_while_meeting:.0%})")
     offset = s["mean_centre_offset_narrow_m"]
     if c.max_mean_centre_offset_narrow_m is not None:
         if offset is None:

@@ -26,8 +26,8 @@ def read_log(path: Path) -> dict[str, np.ndarray]:
     cols: dict[str, np.ndarray] = {}
     for key in (rows[0].keys() if rows else []):
         values = [r[key] for r in rows]
-        try:
-            cols[key] = np.array(values, float)
+        try:  # an empty cell is "not known" (e.g. no water estimate)
+            cols[key] = np.array([v if v != "" else "nan" for v in values], float)
         except ValueError:
             cols[key] = np.array(values)
     return cols
@@ -48,10 +48,11 @@ def _figure(*args, **kwargs):
 
 
 def plot_trajectory(run_dir: Path, outlines, waypoints, out: Path, title: str = "",
-                    window_m: float = 70.0) -> Path:
+                    window_m: float = 70.0, vessels=()) -> Path:
     """The whole map with the track, and beside it a close-up of each snapshot (a square of
     `window_m` around the boat): the segments the controller saw, its predicted horizon and
-    the hull circles, as the paper's snapshot figures."""
+    the hull circles, as the paper's snapshot figures; other vessels' tracks on the map, and
+    their hulls (true) and tracks (as perceived) in the close-ups."""
     log = read_log(run_dir / "log.csv")
     snaps = json.loads((run_dir / "snapshots.json").read_text())
     n = len(snaps)
@@ -62,6 +63,11 @@ def plot_trajectory(run_dir: Path, outlines, waypoints, out: Path, title: str = 
     grid = fig.add_gridspec(rows, 1 + cols, width_ratios=[1.0] + [1.0] * cols)
     overview = fig.add_subplot(grid[:, 0])
     _draw_map(overview, outlines, waypoints, log)
+    t_end = float(log["time_s"][-1]) if len(log["time_s"]) else 0.0
+    for k, v in enumerate(vessels):
+        seen = v.times <= t_end
+        overview.plot(v.poses[seen, 1], v.poses[seen, 0], ":", color="tab:brown", lw=1.0,
+                      label="other vessels" if k == 0 else None)
     overview.set_aspect("equal", adjustable="datalim")
     for j, sn in enumerate(snaps):
         x, y = sn["state"][:2]
@@ -73,6 +79,11 @@ def plot_trajectory(run_dir: Path, outlines, waypoints, out: Path, title: str = 
         ax = fig.add_subplot(grid[j // cols, 1 + j % cols])
         _draw_map(ax, outlines, waypoints, log, legend=False)
         _draw_snapshot(ax, sn, labels=(j == 0))
+        for k, v in enumerate(vessels):
+            hull = v.outline_at(sn["time_s"])
+            ring = np.vstack([hull, hull[:1]])
+            ax.fill(ring[:, 1], ring[:, 0], color="tab:brown", alpha=0.5,
+                    label="vessel (true)" if j == 0 and k == 0 else None)
         x, y = sn["state"][:2]
         ax.set_xlim(y - window_m / 2, y + window_m / 2)
         ax.set_ylim(x - window_m / 2, x + window_m / 2)
@@ -108,6 +119,13 @@ def _draw_snapshot(ax, sn: dict, labels: bool) -> None:
         pred = np.asarray(sn["predicted"])
         ax.plot(pred[:, 1], pred[:, 0], ".-", color="tab:orange", ms=3, lw=1,
                 label="predicted horizon" if labels else None)
+    for i, (tx, ty, th, ln, wd) in enumerate(np.asarray(sn.get("tracks") or [], float)
+                                             .reshape(-1, 5)):
+        c, s = np.cos(th), np.sin(th)
+        box = np.array([[ln, wd], [-ln, wd], [-ln, -wd], [ln, -wd], [ln, wd]]) / 2
+        bx, by = tx + c * box[:, 0] - s * box[:, 1], ty + s * box[:, 0] + c * box[:, 1]
+        ax.plot(by, bx, color="tab:red", lw=1.0,
+                label="vessel tracks" if labels and i == 0 else None)
     x, y, psi = sn["state"][:3]
     for k, off in enumerate((2.0, -2.0)):
         cx, cy = x + off * np.cos(psi), y + off * np.sin(psi)
@@ -156,7 +174,10 @@ def _shade_narrow(ax, t, narrow, label: str) -> None:
 def plot_states(run_dir: Path, out: Path, title: str = "") -> Path:
     log = read_log(run_dir / "log.csv")
     t = log["time_s"]
-    plt, (fig, axes) = _figure(3, 2, figsize=(11, 7), sharex=True)
+    water = "current_est_n_mps" in log and log["current_est_n_mps"].dtype.kind == "f" \
+        and np.isfinite(log["current_est_n_mps"]).any()
+    plt, (fig, axes) = _figure(4 if water else 3, 2, figsize=(11, 9 if water else 7),
+                               sharex=True)
     panels = [
         ("true_u_mps", "est_u_mps", "u [m/s]"),
         ("true_v_mps", "est_v_mps", "v [m/s]"),
@@ -181,6 +202,15 @@ def plot_states(run_dir: Path, out: Path, title: str = "") -> Path:
     ax.plot(t, log["dnS_pctps"], label="dnS")
     ax.set_ylabel("rate [%/s]")
     ax.legend(fontsize=8)
+    if water:
+        for ax, axis, name in zip(axes[3], ("n", "e"), ("north", "east")):
+            est, sigma = log[f"current_est_{axis}_mps"], log[f"current_sigma_{axis}_mps"]
+            ax.fill_between(t, est - 2 * sigma, est + 2 * sigma, color="C1", alpha=0.2,
+                            lw=0, label="estimate +- 2 sigma")
+            ax.plot(t, log[f"current_true_{axis}_mps"], label="true")
+            ax.plot(t, est, lw=0.8, color="C1", label="estimated")
+            ax.set_ylabel(f"current {name} [m/s]")
+        axes[3, 0].legend(fontsize=7)
     for ax in axes[-1]:
         ax.set_xlabel("time [s]")
     fig.suptitle(title or "states and inputs")

@@ -29,6 +29,28 @@ class KnownWalls:
         self._removed = [None] * len(world.walls) + [o.remove_at_s for o in hit]
         self._lines = lines
         self._legs: dict = {}  # which lines are present -> their legs
+        self._vessels = tuple(world.vessels)
+
+    def perceive(self, time_s, true_state, estimated_state):
+        """The known walls and, extended to other boats, the true vessels as tracks."""
+        from controller.perception.feed import Percept
+
+        return Percept(self.segments(time_s, true_state, estimated_state),
+                       self.vessel_tracks(time_s, true_state))
+
+    def vessel_tracks(self, time_s, true_state) -> tuple:
+        """The vessels within range, as tracks built from the truth."""
+        if not self._vessels:
+            return ()
+        from controller.perception.tracking import Track
+
+        out = []
+        for k, v in enumerate(self._vessels):
+            pose = v.pose_at(time_s)
+            if np.hypot(*(pose[:2] - np.asarray(true_state)[:2])) <= self.range_m + v.hull.length_m:
+                out.append(Track.from_truth(k + 1, pose[:2], v.velocity_at(time_s), pose[2],
+                                            v.hull.length_m, v.hull.beam_m))
+        return tuple(out)
 
     def segments(self, time_s, true_state, estimated_state) -> np.ndarray:
         key = tuple(r is None or time_s < r for r in self._removed)
@@ -59,8 +81,10 @@ class LidarPerception:
 
         true_state = np.asarray(true_state, float)
         t0 = time.perf_counter()
-        points = self.simulator.scan(true_state[:3], speed_mps=float(true_state[3]),
-                                     time_s=None if time_s is None else float(time_s))
+        at = None if time_s is None else float(time_s)
+        vessels = self.simulator.world.vessel_obstacles(at) if at is not None else ()
+        points = self.simulator.scan(true_state[:3], speed_mps=float(true_state[3]), time_s=at,
+                                     extra_obstacles=vessels)
         t1 = time.perf_counter()
         self.points_per_scan.append(len(points))
         if not len(points):

@@ -169,17 +169,20 @@ class Obstacle:
 
 @dataclass(frozen=True, eq=False)
 class CanalWorld:
-    """Walls and obstacles of one canal, plus its centre line for 'distance along the canal'."""
+    """Walls and obstacles of one canal, plus its centre line for 'distance along the canal',
+    and the other vessels moving on it (`scenarios.world.vessels`)."""
 
     walls: tuple[Wall, ...]
     obstacles: tuple[Obstacle, ...] = ()
     centre_line: np.ndarray | None = None  # (K, 2); None: the walls' mean is not guessed
     name: str = "canal"
     edges: dict = field(init=False, repr=False)
+    vessels: tuple = ()  # scenarios.world.vessels.Vessel, each a pose at any time
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "walls", tuple(self.walls))
         object.__setattr__(self, "obstacles", tuple(self.obstacles))
+        object.__setattr__(self, "vessels", tuple(self.vessels))
         if not self.walls:
             raise InputError(f"canal {self.name!r}: walls: at least one wall is needed")
         if self.centre_line is not None:
@@ -345,8 +348,13 @@ class CanalWorld:
 
     @property
     def changes(self) -> bool:
-        """Whether anything in the world changes during a run (an obstacle is removed)."""
-        return any(o.remove_at_s is not None for o in self.obstacles)
+        """Whether anything in the world changes during a run (an obstacle is removed, a
+        vessel moves)."""
+        return bool(self.vessels) or any(o.remove_at_s is not None for o in self.obstacles)
+
+    def vessel_obstacles(self, time_s: float) -> tuple:
+        """The other vessels' hulls at `time_s`, as prisms (for the LiDAR simulator)."""
+        return tuple(v.obstacle_at(time_s) for v in self.vessels)
 
     def obstacles_present(self, time_s: float) -> np.ndarray:
         """(O,) mask: which obstacles are in the water at simulation time `time_s`."""

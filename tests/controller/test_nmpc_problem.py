@@ -97,7 +97,7 @@ def test_bad_segments_are_clear_errors(segments, words):
 def test_clearance_is_the_papers_super_ellipse_with_the_slack_on_both_axes():
     """Sign of h equals the sign of eq. mpc:pnorm with the slack shrinking both half axes (so a
     segment's ends are soft too); an inactive slot gives h = 1."""
-    cfg = NmpcConfig(segment_slots=2)
+    cfg = NmpcConfig(segment_slots=2, vessel_slots=0)
     h = clearance_function(cfg)
     rng = np.random.default_rng(1)
     Rb, dp = cfg.hull_radius_m, cfg.separation_m
@@ -107,7 +107,7 @@ def test_clearance_is_the_papers_super_ellipse_with_the_slack_on_both_axes():
         x = np.zeros(9)
         x[:3] = rng.uniform(-15, 15), rng.uniform(-15, 15), rng.uniform(-math.pi, math.pi)
         x[8] = rng.uniform(cfg.slack_min_m, 0)
-        vals = np.array(h(x, slots, [Rb, dp, 2.0, -2.0])).ravel()
+        vals = np.array(h(x, slots, [Rb, dp, 2.0, -2.0, 2.0], np.zeros((6, 0)))).ravel()
         for k, d in enumerate((2.0, -2.0)):
             px, py = x[0] + d * math.cos(x[2]), x[1] + d * math.sin(x[2])
             dx, dy = px - seg[0], py - seg[1]
@@ -155,10 +155,10 @@ def test_the_ocps_dynamics_are_the_smooth_models_rk4(ocp):
     boat = step_function(cfg.step_s, cfg.rk4_substeps, Variant(smooth=True, eps=cfg.smooth_eps))
     p = cfg.boat.as_vector()
     x = np.array([3.0, -2.0, 0.3, 1.8, 0.05, -0.02, 42.0, 15.0, -0.4])
-    held = np.asarray(ocp.dynamics(x, [0.0, 0.0, -0.7], p, [0.2, -0.1])).ravel()
+    held = np.asarray(ocp.dynamics(x, [0.0, 0.0, -0.7], p, [0.2, -0.1], [0, 0, 0])).ravel()
     ref = np.asarray(boat(x[:6], x[6:8], p, [0.2, -0.1])).ravel()
     assert np.allclose(held[:6], ref, rtol=0, atol=1e-12)
     assert held[6:8].tolist() == [42.0, 15.0] and held[8] == -0.7
-    moved = np.asarray(ocp.dynamics(x, [3.0, -5.0, 0.0], p, [0.0, 0.0])).ravel()
+    moved = np.asarray(ocp.dynamics(x, [3.0, -5.0, 0.0], p, [0.0, 0.0], [0, 0, 0])).ravel()
     assert np.allclose(moved[6:8], [45.0, 10.0])
     assert not np.allclose(moved[:6], held[:6])  # the moving actuators act within the step

@@ -414,3 +414,28 @@ def test_an_obstacle_can_be_removed_at_a_time(tmp_path):
         "field 'obstacle[0].remove_at_s': must be >= 0")
     bad(BASE.replace("z_top_m = 1.2", 'z_top_m = 1.2\nremove_at_s = "soon"'), tmp_path,
         "field 'obstacle[0].remove_at_s': expected a number")
+
+
+def test_the_water_mode_and_its_older_name(tmp_path):
+    s, _ = load(BASE + "[controller.options]\nwater = \"still\"\n", tmp_path)
+    assert s.controller_options["water"] == "still"
+    bad(BASE + "[controller.options]\nwater = \"guess\"\n", tmp_path,
+        "field 'controller.options.water'", "estimated")
+    bad(BASE + "[controller.options]\nwater = \"true\"\nknows_current = true\n", tmp_path,
+        "field 'controller.options.knows_current'", "not both")
+
+
+def test_a_current_that_changes_along_the_canal(tmp_path):
+    text = BASE.replace("[plant.boat]", "[current]\nprofile = [[0, 0, 0], [100, 0.1, 0.4]]\n\n"
+                        "[plant.boat]")
+    s, _ = load(text, tmp_path)
+    field = s.current_field
+    assert field.varies
+    assert np.allclose(field.at(s.world.pose_at(50.0)[:2]), (0.05, 0.2))
+    assert np.allclose(field.at(s.world.pose_at(300.0)[:2]), (0.1, 0.4))  # held past the end
+    for profile, words in [("[[0, 0], [10, 1]]", "expected a list of [s_m, north_mps, east_mps]"),
+                           ("[[10, 0, 0], [5, 1, 1]]", "must increase")]:
+        bad(text.replace("[[0, 0, 0], [100, 0.1, 0.4]]", profile), tmp_path,
+            "field 'current.profile'", words)
+    bad(text.replace("[current]\n", "[current]\neast_mps = 0.2\n"), tmp_path,
+        "field 'current.profile'", "not both")
