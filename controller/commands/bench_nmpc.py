@@ -33,6 +33,9 @@ def register_bench(sub) -> None:
                    help="comma list of rti, sqp, ipopt (all three)")
     p.add_argument("--qp-tol", type=float, default=None,
                    help="HPIPM's residual tolerance for RTI and SQP (default: QpOptions')")
+    p.add_argument("--vessel-steps", type=int, default=600,
+                   help="steps of the RTI runs with other vessels (an oncoming tour boat and a "
+                   "crossing launch), with the vessel slots and without them; 0 skips them")
     p.add_argument("--qp-compare-steps", type=int, default=200,
                    help="steps of extra RTI runs with each QP solver (hpipm direct, hpipm "
                    "through CasADi, piqp); 0 skips them (200)")
@@ -75,6 +78,38 @@ def _summary(run, label: str) -> dict:
     if label == "ipopt":
         out["breakdown_mean_ms"] = {"ipopt": out["breakdown_mean_ms"]["qp"],
                                     "glue": out["breakdown_mean_ms"]["glue"]}
+    return out
+
+
+def _vessel_cases(config, qp, canal, x0, act0, args) -> dict:
+    """RTI on the same canal without vessel slots, with them and no vessel, and with them
+    and two vessels (one coming down the first leg, one crossing it), in one session."""
+    from dataclasses import replace
+
+    from controller.nmpc.bench import BenchVessel, closed_loop
+    from controller.nmpc.controller import NmpcController
+
+    vessels = (BenchVessel(1, (70.0, -3.0), (-1.5, 0.0)), BenchVessel(2, (25.0, 30.0), (0.0, -1.0),
+                                                                       9.0, 3.0))
+    cases = {"no_vessel_slots": (replace(config, vessel_slots=0), ()),
+             "vessel_slots_no_vessels": (config, ()),
+             "vessel_slots_two_vessels": (config, vessels)}
+    out = {}
+    for name, (cfg, vs) in cases.items():
+        print(f"bench nmpc: RTI, {name.replace('_', ' ')} ...", file=sys.stderr, flush=True)
+        controller = NmpcController(cfg, method="rti", qp=qp)
+        run = closed_loop(controller, canal, x0, act0, args.vessel_steps, args.speed,
+                          vessels=vs)
+        s = _summary(run, "rti")
+        out[name] = {k: s[k] for k in ("mean_ms", "p99_ms", "max_ms", "cpu_ms",
+                                       "breakdown_mean_ms", "failed_steps", "fallback_steps",
+                                       "stopped_by_failure")}
+        out[name]["vessel_slots"] = cfg.vessel_slots
+    base = out["no_vessel_slots"]["mean_ms"]
+    out["ratio_mean_over_no_vessel_slots"] = {
+        k: round(v["mean_ms"] / base, 2) for k, v in out.items() if k != "no_vessel_slots"}
+    two = out["vessel_slots_two_vessels"]
+    out["goal"] = {"mean_ms<=1": two["mean_ms"] <= 1.0, "p99_ms<=2": two["p99_ms"] <= 2.0}
     return out
 
 
@@ -154,6 +189,9 @@ def run(args) -> int:
             and result.get("rti_vs_sqp_max_position_diff_m", 1e9) <= 0.2,
             "every_run_complete": complete,
         }
+
+    if args.vessel_steps > 0:
+        result["vessels"] = _vessel_cases(config, qp, canal, x0, act0, args)
 
     if args.qp_compare_steps > 0:
         compare = {}

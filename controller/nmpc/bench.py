@@ -101,10 +101,34 @@ class Run:
         return np.array([s.stats.time_total_s for s in self.steps])
 
 
+@dataclass(frozen=True)
+class BenchVessel:
+    """Another vessel at constant velocity, in the form of a perception track."""
+
+    id: int
+    start: tuple
+    velocity: tuple
+    length_m: float = 12.0
+    width_m: float = 3.5
+
+    def at(self, time_s: float):
+        """Its track at `time_s`: position, velocity, heading and a small covariance."""
+        from types import SimpleNamespace
+
+        v = np.asarray(self.velocity, float)
+        return SimpleNamespace(
+            id=self.id, position=np.asarray(self.start, float) + time_s * v, velocity=v,
+            heading_rad=float(np.arctan2(v[1], v[0])) if np.hypot(*v) > 0 else 0.0,
+            length_m=self.length_m, width_m=self.width_m,
+            covariance=np.diag([0.01, 0.01, 0.001, 0.001]))
+
+
 def closed_loop(controller: NmpcController, canal: Canal, x0, actuators0, steps: int,
-                speed_mps: float = 2.0, current=(0.0, 0.0), plant_substeps: int = 2) -> Run:
+                speed_mps: float = 2.0, current=(0.0, 0.0), plant_substeps: int = 2,
+                vessels=()) -> Run:
     """Run the controller every control period on the smooth model (actuator rate limits
-    on). Stops early, with `failure` set, if the controller raises SolverError."""
+    on), with other `vessels` (BenchVessel) if given. Stops early, with `failure` set, if the
+    controller raises SolverError."""
     cfg = controller.config
     plant = plant_step_function(SMOOTH)
     p = cfg.boat.as_vector()
@@ -115,10 +139,12 @@ def closed_loop(controller: NmpcController, canal: Canal, x0, actuators0, steps:
     act = np.asarray(actuators0, float).copy()
     states, acts, out = [x.copy()], [act.copy()], []
     failure = ""
-    for _ in range(steps):
+    for k in range(steps):
         segs = visible_segments(all_segments, x, cfg.segment_range_m)
+        tracks = [v.at(k * cfg.control_period_s) for v in vessels]
         try:
-            step = controller.step(x, act, segs, canal.waypoints, speed_mps, current)
+            step = controller.step(x, act, segs, canal.waypoints, speed_mps, current,
+                                   vessels=tracks)
         except SolverError as exc:
             failure = str(exc)
             break
