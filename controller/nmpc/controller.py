@@ -196,8 +196,11 @@ class NmpcController:
         guess = self._shifted_plan(elapsed)
         if guess is not None:
             x[2] = float(unwrap_near(x[2], guess[self.ocp.state_index(0)][2]))
-        stop = self._stop(x, segments, speed, elapsed, bool(blind))
-        rules = self._rules(x, vessels, segments, speed, elapsed)
+        segs = check_segments(segments)
+        s, d = self._path.frame(x[None, :2], self._progress_m,
+                                self._progress_m + self.search_ahead_m)  # the boat on the path
+        stop = self._stop(float(s[0]), float(d[0]), x, segs, elapsed, bool(blind))
+        rules = self._rules(float(s[0]), float(d[0]), vessels, segs, speed, elapsed)
         stop_at = None if stop is None else stop.at_m
         if rules.stop_at_m is not None:
             stop_at = rules.stop_at_m if stop_at is None else min(stop_at, rules.stop_at_m)
@@ -206,7 +209,7 @@ class NmpcController:
                                          c.step_s, self._progress_m, self.search_ahead_m,
                                          stop_at, c.stop_decel_mps2, current, rules.offset_m)
         planned = reference.states[:, :2] if guess is None else guess[self._xy_at]
-        selection = select_segments(segments, x[:2], c.segment_slots, c.segment_range_m,
+        selection = select_segments(segs, x[:2], c.segment_slots, c.segment_range_m,
                                     planned)
         slots = selection.slots
         vessel_sel = predict_vessels(vessels, c.vessel_slots, c.horizon, c.step_s, planned,
@@ -256,7 +259,7 @@ class NmpcController:
                             vessel_sel, rules)
 
     # -- pieces -----------------------------------------------------------------------------
-    def _rules(self, x: np.ndarray, vessels, segments, speed_mps: float,
+    def _rules(self, s: float, d: float, vessels, segments, speed_mps: float,
                elapsed_s: float) -> Shaping:
         """What the rules of the road ask of the reference for these vessels (`seamanship`).
         A stop to give way is held `resume_after_s` after the rules stop asking for it, so a
@@ -264,10 +267,8 @@ class NmpcController:
         c = self.config
         rules = Shaping()
         if c.colreg and vessels:
-            s, d = self._path.frame(x[None, :2], self._progress_m,
-                                    self._progress_m + self.search_ahead_m)
-            rules = assess(vessels, self._path, float(s[0]), float(d[0]), speed_mps,
-                           check_segments(segments), hull_radius_m=c.hull_radius_m,
+            rules = assess(vessels, self._path, s, d, speed_mps, segments,
+                           hull_radius_m=c.hull_radius_m,
                            separation_m=c.separation_m,
                            vessel_separation_m=c.vessel_separation_m, bow_m=c.bow_m,
                            follow_gap_m=c.follow_gap_m)
@@ -282,15 +283,13 @@ class NmpcController:
             self._rules_stop = None
         return rules
 
-    def _stop(self, x: np.ndarray, segments, speed_mps: float, elapsed_s: float, blind: bool):
+    def _stop(self, s: float, d: float, x: np.ndarray, segments, elapsed_s: float,
+              blind: bool):
         """The stop the reference must make this period (`passage.WayAhead`), or None."""
         c = self.config
-        s_max = self._progress_m + self.search_ahead_m
-        s, d = self._path.frame(x[None, :2], self._progress_m, s_max)
         lookahead = c.segment_range_m + c.stop_short_m
-        segs = check_segments(segments)
-        return self._way.update(self._path, float(s[0]), float(d[0]), float(x[3]), segs, blind,
-                                elapsed_s, lookahead)
+        return self._way.update(self._path, s, d, float(x[3]), segments, blind, elapsed_s,
+                                lookahead)
 
     def _set_path(self, waypoints) -> None:
         """A new waypoint list restarts the progress along the path; the same one keeps it."""
