@@ -61,7 +61,7 @@ from .autopilot_ekf import EkfModel
 from .ekf_state import ned_to_geodetic  # one flat-earth conversion, both ends of the link
 from .autopilot_params import ParamTable, param_id
 from .autopilot_rc import UINT16_MAX, RcInput
-from .rc_mapping import RcMapping
+from controller.pwm import CommandChannels
 from .signing import rejected_for_signature
 
 COMPONENT_ID = 1  # MAV_COMP_ID_AUTOPILOT1
@@ -178,9 +178,9 @@ class AutopilotSim:
         return FmuPlant(self.scenario.plant_params, ActuatorLimits(*self.scenario.actuator_rates),
                         work_dir)
 
-    def _build_mapping(self) -> RcMapping:
+    def _build_mapping(self) -> CommandChannels:
         try:
-            return RcMapping.from_params(self._params.values)
+            return CommandChannels.from_rc_params(self._params.values)
         except ValueError as exc:
             raise InputError(f"autopilot parameters: {exc}") from None
 
@@ -469,7 +469,7 @@ class AutopilotSim:
     def _param_changed(self, name: str) -> None:
         if name.startswith(("RC", "RCMAP_")) and name not in ("RC_OPTIONS", "RC_OVERRIDE_TIME"):
             try:
-                self._mapping = RcMapping.from_params(self._params.values)
+                self._mapping = CommandChannels.from_rc_params(self._params.values)
             except ValueError as exc:
                 self._statustext(f"RC: {exc}; previous kept"[:50], severity=4)
 

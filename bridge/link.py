@@ -131,7 +131,7 @@ class AutopilotLink:
         self.heartbeat: Heartbeat | None = None
         self.params: dict[str, float] = {}
         self.ekf_flags: int | None = None
-        self.rc_mapping = None  # RcMapping, set once the RC parameters are known
+        self.rc_mapping = None  # controller.pwm.CommandChannels, set once the RC parameters are known
         self.last_pwm: dict[int, int] = {}
         self.statustexts: deque[tuple[float, int, str]] = deque(maxlen=20)  # from the autopilot
         self._state: EkfState | None = None

@@ -94,7 +94,7 @@ def prepare_link(link, scenario, options: BridgeOptions = BridgeOptions(), conso
     """Heartbeat, stream rates, RC parameters, pre-flight checks, EKF position, then the mode
     and arming if asked. Raises PreflightRefused (with reasons) or LinkError (no answer)."""
     from bridge import preflight
-    from bridge.rc_mapping import RcMapping
+    from controller.pwm import CommandChannels
 
     link.geodetic_origin = scenario.geodetic_origin
     hb = link.wait_heartbeat(options.heartbeat_timeout_s)
@@ -113,7 +113,7 @@ def prepare_link(link, scenario, options: BridgeOptions = BridgeOptions(), conso
                                  requested_mode=options.mode)
     if reasons:
         raise PreflightRefused(reasons)
-    link.rc_mapping = RcMapping.from_params(params)
+    link.rc_mapping = CommandChannels.from_rc_params(params)
     notes = preflight.notes(link.heartbeat, params, arm=options.arm, requested_mode=options.mode)
     for note in notes:
         _say(console, f"note: {note}")

@@ -37,7 +37,7 @@ import numpy as np
 
 from controller.errors import InputError
 
-from .rc_mapping import RcCalibration, RcMapping
+from controller.pwm import CommandChannels, PwmChannel
 
 log = logging.getLogger(__name__)
 
@@ -101,17 +101,17 @@ def encode_servo_packet(packet: ServoPacket) -> bytes:
             + struct.pack(f"<{len(packet.pwm)}H", *packet.pwm))
 
 
-def servo_calibration(channel: int) -> RcCalibration:
+def servo_calibration(channel: int) -> PwmChannel:
     """A Rover servo output (1000-2000 us, trim 1500, no dead zone) on `channel`."""
-    return RcCalibration(channel, SERVO_MIN, SERVO_MAX, SERVO_TRIM, 0.0)
+    return PwmChannel(channel, SERVO_MIN, SERVO_MAX, SERVO_TRIM)
 
 
-def pwm_to_commands(pwm: tuple[int, ...], steering: RcCalibration,
-                    throttle: RcCalibration) -> tuple[float, float]:
+def pwm_to_commands(pwm: tuple[int, ...], steering: PwmChannel,
+                    throttle: PwmChannel) -> tuple[float, float]:
     """Servo PWM to our (nT, nS) percent. Steering above trim turns to starboard, which is
     nS < 0 in our model; throttle below trim is reverse; 0 (or a missing channel) is neutral."""
     live = {channel: value for channel, value in enumerate(pwm, start=1) if value != 0}
-    return RcMapping(steering, throttle).to_commands(live)  # a missing channel reads trim
+    return CommandChannels(steering, throttle).to_commands(live)  # a missing channel reads trim
 
 
 @dataclass(frozen=True)
