@@ -1,8 +1,15 @@
 """A simulated ArduPilot Rover (boat frame) speaking MAVLink 2, with the boat FMU as its physics.
 
 What is simulated, as ArduPilot Rover does it:
+- Start-up: for `init_s` seconds after (re)boot the mode is INITIALISING and the heartbeat's
+  system_status MAV_STATE_CALIBRATING; MAVLink answers meanwhile, but arming and mode changes
+  are refused, and the steering and throttle dead zones read 0 until start-up ends and sets
+  them to 30 us (unless stored: `Rover::init_rc_in`). Then MANUAL, disarmed.
 - HEARTBEAT (MAV_TYPE_SURFACE_BOAT, MAV_AUTOPILOT_ARDUPILOTMEGA, custom_mode = Rover mode
-  number, SAFETY_ARMED when armed, STANDBY/ACTIVE); boots disarmed in MANUAL.
+  number, SAFETY_ARMED when armed; system_status STANDBY in HOLD, ACTIVE otherwise, as
+  `GCS_MAVLINK_Rover::vehicle_system_status`).
+- A parameter that changes (PARAM_SET from any ground station, `set_param`) is sent to all as
+  PARAM_VALUE; start-up's own defaults are not (ArduPilot's `set_default` does not notify).
 - Parameters (PARAM_REQUEST_READ by name or index, PARAM_REQUEST_LIST, PARAM_SET; REAL32;
   unknown names ignored silently), names of 4.7 or, with `legacy_param_names`, of 4.5.
 - Commands, each ACKed: COMPONENT_ARM_DISARM (21196 forces), DO_SET_MODE, SET/GET_MESSAGE_
@@ -72,6 +79,7 @@ FIRMWARE = {False: (4, 7, 0), True: (4, 5, 7)}  # version announced, by legacy_p
 
 MANUAL = ardupilot.MODES["MANUAL"]
 HOLD = ardupilot.MODES["HOLD"]
+INITIALISING = ardupilot.MODES["INITIALISING"]
 NEEDS_ESTIMATE = {ardupilot.MODES[m] for m in (
     "ACRO", "STEERING", "LOITER", "FOLLOW", "DOCK", "CIRCLE", "AUTO", "RTL", "SMART_RTL", "GUIDED")}
 MANUAL_INPUT_MODES = {ardupilot.MODES[m] for m in ("MANUAL", "ACRO", "STEERING")}
@@ -132,9 +140,13 @@ class AutopilotSim:
     def __init__(self, scenario, url: str, clock, *, seed: int = 0,
                  signing_key: bytes | None = None, params: dict | None = None,
                  ekf_delay_s: float = 20.0, legacy_param_names: bool = False,
-                 work_dir=None, physics_step_s: float = 0.01, system_id: int = 1):
+                 work_dir=None, physics_step_s: float = 0.01, system_id: int = 1,
+                 init_s: float = 3.0):
         if not physics_step_s > 0:
             raise InputError(f"physics step must be positive, got {physics_step_s}")
+        if not (math.isfinite(init_s) and init_s >= 0):
+            raise InputError(f"start-up time must be 0 or more seconds, got {init_s}")
+        self.init_s = float(init_s)
         if not 1 <= int(system_id) <= 255:
             raise InputError(f"system id must be 1..255, got {system_id}")
         self.scenario = scenario
@@ -192,10 +204,14 @@ class AutopilotSim:
                                  allow_unsigned_callback=lambda mav, msg_id: msg_id in UNSIGNED_ALLOWED)
 
     def _boot(self, boot_t: float) -> None:
-        """Power-on state: disarmed, MANUAL, no overrides, default streams, EKF not ready."""
+        """Power-on state: starting up (INITIALISING), disarmed, no overrides, default
+        streams, EKF not ready, start-up's parameter values."""
         self._boot_t = boot_t
         self.armed = False
-        self.mode = MANUAL
+        self.mode = INITIALISING
+        self._initialised = False
+        self._params.boot()
+        self._mapping = self._build_mapping()
         self._rc.clear()
         self._streams.reset(0.0)
         self._param_queue: deque[int] = deque()
@@ -233,8 +249,13 @@ class AutopilotSim:
         return dict(self._params.values)
 
     @property
+    def initialised(self) -> bool:
+        """Start-up is over (the mode is no longer INITIALISING)."""
+        return self._initialised
+
+    @property
     def ekf_ready(self) -> bool:
-        return self._ekf.ready(self.boot_s)
+        return self._initialised and self._ekf.ready(self.boot_s)
 
     @property
     def system_id(self) -> int:
@@ -245,6 +266,8 @@ class AutopilotSim:
         ok = self._params.set(name, float(value))
         if ok:
             self._param_changed(name)
+            if self._conn is not None:
+                self._send_param(name)
         return ok
 
     # -- the loop -------------------------------------------------------------------------
@@ -254,6 +277,8 @@ class AutopilotSim:
         `now` is clock time; the physics' time 0 is the clock's time at construction."""
         if self._conn is None:
             return
+        if not self._initialised and self.boot_s >= self.init_s - 1e-9:
+            self._finish_init()
         self._receive_all()
         if self._reboot_pending:
             self.restart()
@@ -268,6 +293,14 @@ class AutopilotSim:
         while duration_s is None or self.clock.now() - start < duration_s:
             self.pump(self.clock.now())
             self.clock.sleep(0.002)
+
+    def _finish_init(self) -> None:
+        """The end of start-up: Rover's late defaults (dead zones), then MANUAL."""
+        if self._params.finish_init():
+            self._mapping = self._build_mapping()
+        self._initialised = True
+        self.mode = MANUAL
+        self._statustext("Ready to drive", severity=6)
 
     def restart(self) -> None:
         """A reboot: boot time from 0, disarmed, MANUAL, EKF not ready; the boat keeps moving."""
@@ -512,6 +545,9 @@ class AutopilotSim:
         mav = _mavlink2()
         force = _int(p[1]) == ardupilot.FORCE_ARM_MAGIC
         if p[0] == 1:
+            if not self._initialised:
+                self._statustext("Arm: System not initialised", severity=2)
+                return mav.MAV_RESULT_TEMPORARILY_REJECTED
             if self.armed:
                 return mav.MAV_RESULT_ACCEPTED
             if not force and not self._prearm_ok():
@@ -538,6 +574,9 @@ class AutopilotSim:
         mav = _mavlink2()
         if not base_mode & mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
             return mav.MAV_RESULT_DENIED
+        if not self._initialised:
+            self._statustext("Mode change failed: still initialising", severity=4)
+            return mav.MAV_RESULT_TEMPORARILY_REJECTED
         name = ardupilot.MODE_NAMES.get(custom_mode)
         if name is None or name == "INITIALISING":
             self._statustext(f"Unknown mode {custom_mode}", severity=4)
@@ -619,11 +658,16 @@ class AutopilotSim:
         base = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
         if self.mode in MANUAL_INPUT_MODES:
             base |= mav.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
-        elif self.mode != HOLD:
+        elif self.mode not in (HOLD, INITIALISING):
             base |= mav.MAV_MODE_FLAG_GUIDED_ENABLED
         if self.armed:
             base |= mav.MAV_MODE_FLAG_SAFETY_ARMED
-        status = mav.MAV_STATE_ACTIVE if self.armed else mav.MAV_STATE_STANDBY
+        if not self._initialised:
+            status = mav.MAV_STATE_CALIBRATING
+        elif self.mode == HOLD:
+            status = mav.MAV_STATE_STANDBY
+        else:
+            status = mav.MAV_STATE_ACTIVE
         self._conn.mav.heartbeat_send(mav.MAV_TYPE_SURFACE_BOAT, mav.MAV_AUTOPILOT_ARDUPILOTMEGA,
                                       base, self.mode, status)
 

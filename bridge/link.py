@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import select
 import statistics
 import struct
@@ -45,6 +46,7 @@ VEHICLE_TYPES_NOT_AUTOPILOT = {mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CO
                                mavlink.MAV_TYPE_GIMBAL, mavlink.MAV_TYPE_ADSB}
 MAX_MESSAGES_PER_PUMP = 5000  # a flood cannot starve the control loop for long
 POLL_S = 0.01
+RC_PARAM = re.compile(r"^(RCMAP_[A-Z]+|RC\d+_[A-Z]+)$")  # what the RC mapping is made of
 
 
 class LinkError(CanalnavError):
@@ -71,6 +73,21 @@ class Heartbeat:
     @property
     def mode(self) -> str:
         return MODE_NAMES.get(self.custom_mode, f"mode {self.custom_mode}")
+
+
+@dataclass(frozen=True)
+class ParamChange:
+    """A parameter whose PARAM_VALUE differs from the value the bridge knew (bridge clock)."""
+
+    name: str
+    old: float
+    new: float
+    received_s: float
+    note: str = ""  # what the bridge did about it (e.g. the RC mapping it now uses)
+
+    def describe(self) -> str:
+        text = f"parameter {self.name} changed from {self.old:g} to {self.new:g}"
+        return f"{text}: {self.note}" if self.note else text
 
 
 @dataclass
@@ -130,6 +147,9 @@ class AutopilotLink:
         self.counters = LinkCounters()
         self.heartbeat: Heartbeat | None = None
         self.params: dict[str, float] = {}
+        self.param_changes: deque[ParamChange] = deque(maxlen=100)  # for the loop to log
+        self._fresh: set[str] = set()  # names answered since they were last asked for
+        self._absent: set[str] = set()  # optional names this firmware did not answer
         self.ekf_flags: int | None = None
         self.rc_mapping = None  # controller.pwm.CommandChannels, set once the RC parameters are known
         self.last_pwm: dict[int, int] = {}
@@ -276,8 +296,46 @@ class AutopilotLink:
         self.ekf_flags = int(msg.flags)
 
     def _on_param_value(self, msg, now: float) -> None:
+        """A parameter's value (an answer, or a change made by anyone: ArduPilot sends every
+        change to all). A change is applied (the RC mapping follows its RCn_* and RCMAP_*)
+        and queued in `param_changes` for the loop to log."""
         name = msg.param_id.decode() if isinstance(msg.param_id, bytes) else str(msg.param_id)
-        self.params[name.rstrip("\x00")] = float(msg.param_value)
+        name = name.split("\x00", 1)[0]
+        value = float(msg.param_value)
+        if not math.isfinite(value):
+            self.counters.bad_data += 1
+            return
+        old = self.params.get(name)
+        self.params[name] = value
+        self._fresh.add(name)
+        if old is not None and old != value:
+            self.param_changes.append(ParamChange(name, old, value, now, self._follow(name)))
+
+    def _follow(self, name: str) -> str:
+        """Rebuild the RC mapping after a change to one of its parameters; what was done."""
+        from controller.pwm import CommandChannels
+
+        if self.rc_mapping is None or not RC_PARAM.match(name):
+            return ""
+        try:
+            mapping = CommandChannels.from_rc_params(self.params)
+        except (TypeError, ValueError) as exc:
+            return f"not applied, the RC mapping would be invalid ({exc}); previous kept"
+        if mapping == self.rc_mapping:
+            return ""
+        self.rc_mapping = mapping
+        m = mapping
+        return (f"RC mapping updated (steering RC{m.steering.channel} {m.steering.min}/"
+                f"{m.steering.trim}/{m.steering.max} us dead zone {m.steering.dz}"
+                f"{' reversed' if m.steering.reversed else ''}, throttle RC{m.throttle.channel} "
+                f"{m.throttle.min}/{m.throttle.trim}/{m.throttle.max} us dead zone "
+                f"{m.throttle.dz}{' reversed' if m.throttle.reversed else ''})")
+
+    def pop_param_changes(self) -> list[ParamChange]:
+        """The changes seen since the last call, oldest first."""
+        out = list(self.param_changes)
+        self.param_changes.clear()
+        return out
 
     def _on_command_ack(self, msg, now: float) -> None:
         target = getattr(msg, "target_system", 0)
@@ -439,6 +497,28 @@ class AutopilotLink:
             raise LinkError(refused[0])
         return self.heartbeat
 
+    def wait_past_startup(self, timeout_s: float = 60.0) -> Heartbeat:
+        """Wait until the heartbeat says the autopilot is running: not MAV_STATE_UNINIT, BOOT
+        or CALIBRATING, not in mode INITIALISING. ArduPilot answers MAVLink during its
+        start-up but sets some parameters (Rover: the RC dead zones) only at its end."""
+        from bridge.ardupilot import MAV_STATE_STARTING, MODES
+
+        def running() -> bool:
+            hb = self.heartbeat
+            return (hb is not None and hb.system_status not in MAV_STATE_STARTING
+                    and hb.custom_mode != MODES["INITIALISING"]
+                    and self.clock.now() - hb.received_s <= self.link_timeout_s)
+
+        if not self.wait_until(running, timeout_s):
+            hb = self.heartbeat
+            state = ("no heartbeat" if hb is None else
+                     f"HEARTBEAT system_status {MAV_STATE_STARTING.get(hb.system_status, hb.system_status)}"
+                     f", mode {hb.mode}")
+            raise LinkError(f"the autopilot is still starting up after {timeout_s:g} s ({state}); "
+                            "ArduPilot sets some parameters (the RC dead zones) only at the end "
+                            "of its start-up, so the bridge waits for it")
+        return self.heartbeat
+
     def wait_position_ok(self, timeout_s: float) -> EkfState:
         """Wait until the EKF reports a usable horizontal position and a fresh state exists."""
         if not self.wait_until(lambda: self.horizontal_position_ok and self.state_fresh, timeout_s):
@@ -498,33 +578,51 @@ class AutopilotLink:
             alias = next((pair for pair in PARAM_ALIASES.values() if name in pair), (name,))
             if alias not in groups:
                 groups.append(alias)
-        extra = [n for n in optional if not any(n in g for g in groups)]
+        extra = [n for n in optional if not any(n in g for g in groups) and n not in self._absent]
+
+        fresh = self._fresh
 
         def missing():
-            return [g for g in groups if not any(n in self.params for n in g)]
+            return [g for g in groups if not any(n in fresh for n in g)]
 
         for name in [n for g in groups for n in g] + extra:
-            self.params.pop(name, None)  # read fresh values
+            fresh.discard(name)  # read fresh values (the known ones stay, to see changes)
         for attempt in range(max(1, retries)):
             todo = missing()
             if not todo and attempt > 0:
                 break
-            ask = [n for g in todo for n in g] + ([n for n in extra if n not in self.params]
+            ask = [n for g in todo for n in g] + ([n for n in extra if n not in fresh]
                                                  if attempt == 0 else [])
             ts, tc = self._target()
             for name in ask:
                 self._conn.mav.param_request_read_send(ts, tc, name.encode(), -1)
             if self.wait_until(lambda: not missing(), timeout_s):
-                self.wait_until(lambda: all(n in self.params for n in extra), min(0.2, timeout_s))
+                self.wait_until(lambda: all(n in fresh for n in extra), min(0.2, timeout_s))
                 break
         out = {}
         for g in groups:
             for n in g:
-                if n in self.params:
+                if n in fresh:
                     out.update({alias: self.params[n] for alias in g})
                     break
-        out.update({n: self.params[n] for n in extra if n in self.params})
+        out.update({n: self.params[n] for n in extra if n in fresh})
         return out
+
+    def wait_params_settled(self, names, *, optional=(), timeout_s: float = 10.0) -> dict[str, float]:
+        """Read `names` (as `fetch_params`) until two reads in a row agree: values that are
+        still being set (the end of a start-up, a ground station writing them) are not used."""
+        deadline = self.clock.now() + timeout_s
+        previous = self.fetch_params(names, optional=optional)
+        self._absent.update(n for n in optional if n not in previous)
+        while True:
+            got = self.fetch_params(names, optional=optional)
+            if got == previous:
+                return got
+            if self.clock.now() >= deadline:
+                moving = sorted(n for n in set(got) | set(previous) if got.get(n) != previous.get(n))
+                raise LinkError(f"parameters still changing after {timeout_s:g} s: "
+                                + ", ".join(f"{n} {previous.get(n)} -> {got.get(n)}" for n in moving))
+            previous = got
 
     def _refusal(self, what: str, result: int | None) -> LinkError:
         if result is None:

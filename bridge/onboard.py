@@ -59,6 +59,7 @@ class BridgeOptions:
     speedup: float = 1.0
     ekf_timeout_s: float = 120.0
     heartbeat_timeout_s: float = 30.0
+    startup_timeout_s: float = 60.0  # for the autopilot to finish its start-up
     stream_rate_hz: float = 20.0
     control_period_s: float = 0.1
     seed: int | None = None  # simulated LiDAR noise (default: the scenario's seed)
@@ -90,9 +91,28 @@ def _say(console, text: str) -> None:
         console.flush()
 
 
+def _rc_summary(m) -> str:
+    def one(c):
+        rev = ", reversed" if c.reversed else ""
+        return f"channel {c.channel} ({c.min}/{c.trim}/{c.max} us, dead zone {c.dz} us{rev})"
+    return f"RC: throttle {one(m.throttle)}, steering {one(m.steering)}"
+
+
+def _read_rc_params(link) -> dict:
+    """The parameters the pre-flight checks and the RC mapping need, read until settled."""
+    from bridge import preflight
+
+    params = link.wait_params_settled(preflight.BASE_PARAMS + preflight.GCS_SYSID_NAMES,
+                                      optional=(preflight.GCS_SYSID_HIGH,))
+    params.update(link.wait_params_settled(preflight.channel_params(params)))
+    return params
+
+
 def prepare_link(link, scenario, options: BridgeOptions = BridgeOptions(), console=None) -> Preparation:
-    """Heartbeat, stream rates, RC parameters, pre-flight checks, EKF position, then the mode
-    and arming if asked. Raises PreflightRefused (with reasons) or LinkError (no answer)."""
+    """Bounded, named waits from "heard nothing" to "ready to steer", as ArduPilot's autotest
+    does them: heartbeat, past start-up, stream rates, RC parameters (read until settled),
+    pre-flight checks, EKF position, the RC parameters again just before taking control, then
+    the mode and arming if asked. Raises PreflightRefused (with reasons) or LinkError."""
     from bridge import preflight
     from controller.pwm import CommandChannels
 
@@ -101,14 +121,16 @@ def prepare_link(link, scenario, options: BridgeOptions = BridgeOptions(), conso
     _say(console, f"autopilot: system {hb.system_id} component {hb.component_id}, "
                   f"{'boat' if hb.type == preflight.MAV_TYPE_SURFACE_BOAT else 'rover'}, "
                   f"{hb.mode}, {'armed' if hb.armed else 'disarmed'}")
+    if hb.custom_mode == 16 or hb.system_status in (0, 1, 2):
+        _say(console, "autopilot: starting up; waiting for it to finish before reading "
+                      "parameters")
+    hb = link.wait_past_startup(options.startup_timeout_s)
     streams = link.request_streams(options.stream_rate_hz)
     unanswered = [k for k, v in streams.items() if v != 0]
     if unanswered:
         _say(console, "note: SET_MESSAGE_INTERVAL not accepted for " + ", ".join(
             f"{k} ({'no answer' if streams[k] is None else f'result {streams[k]}'})" for k in unanswered))
-    params = link.fetch_params(preflight.BASE_PARAMS + preflight.GCS_SYSID_NAMES,
-                               optional=(preflight.GCS_SYSID_HIGH,))
-    params.update(link.fetch_params(preflight.channel_params(params)))
+    params = _read_rc_params(link)
     reasons = preflight.refusals(link.heartbeat, params, system_id=link.system_id,
                                  requested_mode=options.mode)
     if reasons:
@@ -117,12 +139,24 @@ def prepare_link(link, scenario, options: BridgeOptions = BridgeOptions(), conso
     notes = preflight.notes(link.heartbeat, params, arm=options.arm, requested_mode=options.mode)
     for note in notes:
         _say(console, f"note: {note}")
-    m = link.rc_mapping
-    _say(console, f"RC: throttle channel {m.throttle.channel} ({m.throttle.min:g}/{m.throttle.trim:g}/"
-                  f"{m.throttle.max:g} us), steering channel {m.steering.channel} "
-                  f"({m.steering.min:g}/{m.steering.trim:g}/{m.steering.max:g} us)")
+    _say(console, _rc_summary(link.rc_mapping))
     link.wait_position_ok(options.ekf_timeout_s)
     _say(console, "EKF: horizontal position usable")
+    # again, just before taking control: a parameter may have changed while we waited
+    again = _read_rc_params(link)
+    changed = sorted(n for n in set(params) | set(again) if params.get(n) != again.get(n))
+    if changed:
+        for n in changed:
+            _say(console, f"note: {n} changed from {params.get(n)} to {again.get(n)} since it was "
+                          "first read; using the new value")
+        reasons = preflight.refusals(link.heartbeat, again, system_id=link.system_id,
+                                     requested_mode=options.mode)
+        if reasons:
+            raise PreflightRefused(reasons)
+        link.rc_mapping = CommandChannels.from_rc_params(again)
+        _say(console, _rc_summary(link.rc_mapping))
+    params = again
+    link.pop_param_changes()  # accounted for; the loop logs those that come from now on
     if options.mode:  # always: the heartbeat (1 Hz) may not show our own HOLD yet
         link.set_mode(options.mode)
         _say(console, f"mode set to {options.mode.upper()}")
@@ -197,7 +231,7 @@ class OnboardLoop:
             if self.options.duration_s is not None and t >= self.options.duration_s:
                 self._stop("time limit", MAV_SEVERITY_WARNING)
                 return self._result(EXIT_STOPPED, "time limit")
-            fault = self._fault()
+            fault = self._follow_params(t) or self._fault()
             if fault is None:
                 state = self.link.state
                 if np.hypot(state.x - goal[0], state.y - goal[1]) <= self.scenario.goal_radius_m:
@@ -219,6 +253,24 @@ class OnboardLoop:
                 self.clock.sleep(wait)
             else:
                 next_t = self.clock.now()
+
+    def _follow_params(self, t: float) -> str | None:
+        """Log each parameter the autopilot reported changed (the link has applied it: the RC
+        mapping follows); a change that makes the autopilot ignore us is a fault."""
+        from bridge import preflight
+
+        changes = self.link.pop_param_changes()
+        if not changes:
+            return None
+        hb = self.link.heartbeat
+        for change in changes:
+            self.log.event(t, change.describe(), hb.mode if hb else "", hb.armed if hb else None)
+            self._say(f"bridge: {change.describe()}")
+        names = {c.name for c in changes}
+        reasons = [r for r in preflight.refusals(hb, self.link.params, system_id=self.link.system_id,
+                                                 requested_mode=self.options.mode or "MANUAL")
+                   if any(n in r for n in names)]
+        return f"parameter change: {reasons[0]}" if reasons else None
 
     def _fault(self) -> str | None:
         """Why the loop must not steer now (short: it goes to the ground station), or None."""

@@ -49,6 +49,7 @@ class Rig:
         self.port = free_udp_port()
         self.clock = VirtualClock(0.01)
         kwargs.setdefault("ekf_delay_s", 1.0)
+        kwargs.setdefault("init_s", 0.0)  # running at once (start-up has its own test)
         self.sim = AutopilotSim(scenario, f"udpin:127.0.0.1:{self.port}", self.clock,
                                 work_dir=tmp_path, **kwargs)
         self.clock.add_peer(self.sim.pump)
@@ -141,10 +142,35 @@ def test_heartbeat_says_boat_ardupilot_manual_disarmed_mavlink2(make_rig):
     assert hb.type == 11 and hb.autopilot == 3  # MAV_TYPE_SURFACE_BOAT, ARDUPILOTMEGA
     assert hb.base_mode & CUSTOM and not hb.base_mode & SAFETY_ARMED
     assert hb.custom_mode == ardupilot.MODES["MANUAL"]
-    assert hb.system_status == 3  # MAV_STATE_STANDBY
+    assert hb.system_status == 4  # MAV_STATE_ACTIVE: Rover says STANDBY only in HOLD
     assert hb.get_msgbuf()[0] == 253  # MAVLink 2 frame
     beats = [m for m in rig.run(3.0) if m.get_type() == "HEARTBEAT"]
     assert 2 <= len(beats) <= 4  # 1 Hz
+
+
+def test_start_up_like_rover(make_rig):
+    """INITIALISING and CALIBRATING for init_s, dead zones 0 until start-up sets them to 30
+    (without a PARAM_VALUE), arming and modes refused meanwhile; a stored value stays."""
+    rig = make_rig(init_s=2.0, params={"RC3_DZ": 45})
+    hb = rig.wait("HEARTBEAT")
+    assert hb.custom_mode == ardupilot.MODES["INITIALISING"] and hb.system_status == 2
+    assert rig.param("RC1_DZ").param_value == 0  # not yet Rover's 30 us
+    assert rig.param("RC3_DZ").param_value == 45  # stored: start-up leaves it alone
+    assert rig.command(CMD_ARM, 1).result == 1  # MAV_RESULT_TEMPORARILY_REJECTED
+    assert rig.command(CMD_DO_SET_MODE, CUSTOM, ardupilot.MODES["HOLD"]).result == 1
+    rig.client.inbox.clear()
+    hb = rig.wait("HEARTBEAT", lambda m: m.custom_mode == ardupilot.MODES["MANUAL"], timeout_s=3.0)
+    assert hb.system_status == 4 and rig.sim.initialised
+    assert not any(m.get_type() == "PARAM_VALUE" for m in rig.client.inbox)  # set silently
+    assert rig.param("RC1_DZ").param_value == 30
+    assert rig.command(CMD_ARM, 1, ardupilot.FORCE_ARM_MAGIC).result == ACCEPTED
+    # a change from anyone is sent to all
+    rig.sim.set_param("RC1_TRIM", 1490)
+    assert rig.wait("PARAM_VALUE", lambda m: m.param_id == "RC1_TRIM").param_value == 1490
+    # a reboot starts up again: the dead zone reads 0 until it is over
+    rig.command(CMD_ARM, 0)
+    rig.sim.restart()
+    assert rig.param("RC1_DZ").param_value == 0 and not rig.sim.initialised
 
 
 def test_parameters_read_by_name_and_index_list_and_set(make_rig):
@@ -407,7 +433,7 @@ def test_restart_resets_boot_time_and_state_not_the_boat(make_rig):
     assert att.time_boot_ms > 1900
     x_before = rig.sim.true_state
     rig.sim.restart()
-    assert not rig.sim.armed and rig.sim.mode == ardupilot.MODES["MANUAL"]
+    assert not rig.sim.armed and rig.sim.mode == ardupilot.MODES["INITIALISING"]  # starts up
     assert rig.sim.outputs == (0.0, 0.0)
     got = rig.run(0.5)
     assert [m.time_boot_ms for m in got if m.get_type() == "ATTITUDE"][0] < 100

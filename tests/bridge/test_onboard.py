@@ -133,8 +133,10 @@ def test_runs_to_the_goal_and_exits_0(make_autopilot, vclock, scenario, tmp_path
     ctrl = StubController(command=(30.0, 10.0))
     result, console = run_loop(ap, vclock, scenario, ctrl, log_dir=tmp_path)
     assert result.exit_code == EXIT_GOAL and result.reached_goal and result.reason == "reached the goal"
-    # 25 m at 4 m/s, 10 Hz
-    assert 60 <= result.steps <= 66
+    # from where the loop started to 25 m (the goal's radius short of it) at 4 m/s, 10 Hz
+    rows = read_steps(tmp_path)
+    x0 = float(next(r for r in rows if r["x_m"])["x_m"])
+    assert result.steps == pytest.approx((25.0 - x0) / 0.4, abs=3)
     # commands at the autopilot: nT 30 on ch3 above trim, nS 10 (port) on ch1 below trim
     drive = [o for o in ap.overrides() if o[2] not in (0, 1500)]
     assert drive[0][:8] == [1433, 65535, 1641, 65535, 65535, 65535, 65535, 65535]

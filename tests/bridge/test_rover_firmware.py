@@ -1,0 +1,182 @@
+"""What the real ArduPilot Rover firmware does that a naive bridge misses (issue 19), on the
+simulated autopilot that now boots and behaves like it, in lock-step on a virtual clock:
+
+1. parameters read during start-up are not the ones that apply (dead zones set late);
+2. the EKF origin is wherever the first GPS fix came, not the scenario's (0, 0);
+3. messages must be stamped when they arrive, and the state aged by the autopilot's clock;
+4. the throttle input is truncated to whole percent.
+"""
+
+from __future__ import annotations
+
+import io
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bridge.autopilot_sim import AutopilotSim
+from bridge.clock import VirtualClock
+from bridge.link import AutopilotLink
+from bridge.lossy_relay import LossyRelay
+from bridge.mavlink_plant import free_udp_port
+from bridge.onboard import BridgeOptions, prepare_link
+from scenarios.scenario_file import load_scenario
+
+ROOT = Path(__file__).resolve().parents[2]
+ORIGIN = (52.0, 4.0, 0.0)
+
+
+@pytest.fixture(scope="module")
+def straight():
+    """straight.toml (starts 2 m off the centre line at 1 m/s), placed on the Earth."""
+    s = load_scenario(ROOT / "scenarios" / "straight.toml")
+    return replace(s, geodetic_origin=ORIGIN)
+
+
+class Rig:
+    """Simulated autopilot <- (relay) -> bridge link, on one virtual clock."""
+
+    def __init__(self, scenario, tmp_path, *, latency_s=0.0, loss=0.0, init_s=3.0,
+                 ekf_delay_s=5.0, seed=4, params=None):
+        self.clock = VirtualClock(0.01)
+        port = free_udp_port()
+        self.autopilot = AutopilotSim(scenario, f"udpin:127.0.0.1:{port}", self.clock,
+                                      seed=seed, ekf_delay_s=ekf_delay_s, init_s=init_s,
+                                      work_dir=tmp_path, params=params)
+        self.clock.add_peer(self.autopilot.pump)
+        self.relay = None
+        if latency_s or loss:
+            self.relay = LossyRelay(("127.0.0.1", port), self.clock, latency_s=latency_s,
+                                    loss=loss, seed=seed)
+            self.clock.add_peer(self.relay.pump)
+            port = self.relay.port
+        self.link = AutopilotLink(f"udpout:127.0.0.1:{port}", self.clock)
+        self.scenario = scenario
+        self.console = io.StringIO()
+
+    def prepare(self, **options):
+        options = {"mode": "MANUAL", "arm": True, "ekf_timeout_s": 30.0, **options}
+        return prepare_link(self.link, self.scenario, BridgeOptions(**options), self.console)
+
+    def command(self, nT, nS, seconds=0.3):
+        """Send (nT, nS) every 0.1 s for `seconds`; the autopilot's outputs at the end."""
+        for _ in range(int(round(seconds / 0.1))):
+            self.link.send_commands(nT, nS)
+            self.link.wait_until(lambda: False, 0.1)
+        return self.autopilot.outputs
+
+    def close(self):
+        self.link.close()
+        if self.relay is not None:
+            self.relay.close()
+        self.autopilot.close()
+
+
+@pytest.fixture
+def rig(straight, tmp_path):
+    made = []
+
+    def make(scenario=straight, **kwargs):
+        r = Rig(scenario, tmp_path / f"rig{len(made)}", **kwargs)
+        made.append(r)
+        return r
+
+    yield make
+    for r in made:
+        r.close()
+
+
+# -- 1. parameters after start-up ------------------------------------------------------------
+def test_rc_parameters_are_read_after_start_up_so_small_steering_moves_the_rudder(rig):
+    r = rig()
+    r.prepare()
+    steer = r.link.rc_mapping.steering
+    assert steer.dz == 30, "read before Rover's start-up set the dead zone"
+    assert r.autopilot.initialised
+    # a 2 % correction either way reaches the autopilot (it is within trim +- 30 us if the
+    # dead zone is not known: 2 % of 400 us is 8 us)
+    for nS in (2.0, -2.0):
+        nT_out, nS_out = r.command(20.0, nS)
+        assert nS_out == pytest.approx(nS, abs=0.3), (nS, nS_out)
+    assert r.command(20.0, 100.0)[1] == pytest.approx(100.0)  # the largest stays at the end
+
+
+class Constant:
+    """A controller that always asks for the same command."""
+
+    name = "constant"
+
+    def __init__(self, command):
+        self.command = np.asarray(command, float)
+
+    def step(self, time_s, state, actuators, segments):
+        from scenarios.loop.closed_loop import Decision
+
+        return Decision(command=self.command.copy())
+
+
+class NoLidar:
+    def scan(self, time_s, pose):
+        return None
+
+
+def run_loop(r, tmp_path, controller, at_steps=None, **options):
+    """The onboard loop on the rig; `at_steps` = {step: action(rig)} applied as it runs."""
+    from bridge.onboard import OnboardLoop
+    from bridge.step_log import StepLog
+
+    log = StepLog(tmp_path)
+    options = {"mode": "MANUAL", "arm": True, "ekf_timeout_s": 30.0, "duration_s": 8.0, **options}
+    loop = OnboardLoop(r.link, r.scenario, controller, NoLidar(), BridgeOptions(**options),
+                       console=r.console, log=log)
+    pending = dict(at_steps or {})
+    outputs = []
+
+    def script(now):
+        for k in [k for k in pending if loop.steps >= k]:
+            pending.pop(k)(r)
+        outputs.append((loop.steps, r.autopilot.outputs))
+
+    r.clock.add_peer(script)
+    try:
+        result = loop.run()
+    finally:
+        log.close()
+    import csv
+
+    with (tmp_path / "steps.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    return result, rows, outputs
+
+
+def test_a_parameter_changed_during_the_run_is_applied_and_logged(rig, tmp_path):
+    r = rig()
+    result, rows, outputs = run_loop(
+        r, tmp_path, Constant((20.0, 5.0)),
+        at_steps={20: lambda r: r.autopilot.set_param("RC1_DZ", 60),
+                  40: lambda r: r.autopilot.set_param("RC1_REVERSED", 1)})
+    assert result.reason == "time limit" and not result.failsafes
+    events = [row["status"] for row in rows if not row["x_m"]]
+    assert any(e.startswith("parameter RC1_DZ changed from 30 to 60: RC mapping updated")
+               and "dead zone 60" in e for e in events), events
+    assert any(e.startswith("parameter RC1_REVERSED changed from 0 to 1") and "reversed" in e
+               for e in events), events
+    pwm = [int(row["steering_pwm_us"]) for row in rows if row["x_m"]]
+    assert pwm[5] < 1500 - 30 and pwm[30] < 1500 - 60 < pwm[5]  # port turn: below trim
+    assert pwm[-1] > 1500 + 60  # reversed: the same port turn is above trim
+    # the autopilot read 5 % to port throughout (apart from the step each change took)
+    read = [nS for k, (nT, nS) in outputs if 10 <= k <= 75 and k not in range(19, 23)
+            and k not in range(39, 43)]
+    assert read and all(abs(nS - 5.0) < 0.5 for nS in read), sorted(set(read))
+    assert "bridge: parameter RC1_DZ changed from 30 to 60" in r.console.getvalue()
+
+
+def test_a_parameter_change_that_makes_the_autopilot_ignore_us_fails_safe(rig, tmp_path):
+    r = rig()
+    result, rows, _ = run_loop(r, tmp_path, Constant((20.0, 0.0)),
+                               at_steps={10: lambda r: r.autopilot.set_param("RC_OPTIONS", 2)})
+    assert result.failsafes and result.failsafes[0].startswith(
+        "parameter change: RC_OPTIONS = 2 has bit 1"), result
+    assert rows[-1]["status"].startswith("FAILSAFE parameter change")
