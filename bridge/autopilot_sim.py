@@ -22,10 +22,13 @@ What is simulated, as ArduPilot Rover does it:
 - Streams (defaults in `autopilot_streams.DEFAULT_INTERVALS`): HEARTBEAT, SYS_STATUS and
   EKF_STATUS_REPORT at 1 Hz; ATTITUDE, LOCAL_POSITION_NED, GLOBAL_POSITION_INT at 4 Hz;
   RC_CHANNELS and SERVO_OUTPUT_RAW off. A reboot forgets requested rates.
-- The EKF (`autopilot_ekf`): attitude only until `ekf_delay_s` after boot, then position
-  and velocity; LOCAL_POSITION_NED and GLOBAL_POSITION_INT are sent only once the position
-  is valid. The local NED origin is the scenario's origin (`geodetic_origin`, else ArduPilot
-  SITL's default home).
+- The EKF (`autopilot_ekf`): attitude only until `ekf_delay_s` after boot (the first GPS
+  fix; never before start-up is over), then position and velocity; LOCAL_POSITION_NED and
+  GLOBAL_POSITION_INT are sent only once the position is valid. The scenario's (0, 0) is on
+  the Earth at its `[origin]` (else at ArduPilot SITL's default home, as SITL puts it);
+  GLOBAL_POSITION_INT is there. The EKF origin is set at the first fix wherever the boat is
+  then (moving or not), and LOCAL_POSITION_NED is measured from it; GPS_GLOBAL_ORIGIN says
+  where it is (sent when set, on request, or as a stream). A reboot forgets it.
 - TIMESYNC requests are answered; the legacy REQUEST_DATA_STREAM sets a group's rate
   (EXTENDED_STATUS: SYS_STATUS; RC_CHANNELS: RC_CHANNELS, SERVO_OUTPUT_RAW; POSITION:
   GLOBAL_POSITION_INT, LOCAL_POSITION_NED; EXTRA1: ATTITUDE; EXTRA3: EKF_STATUS_REPORT).
@@ -65,7 +68,7 @@ from controller.errors import InputError
 from . import ardupilot
 from . import autopilot_streams as st
 from .autopilot_ekf import EkfModel
-from .ekf_state import ned_to_geodetic  # one flat-earth conversion, both ends of the link
+from .ekf_state import geodetic_to_ned, ned_to_geodetic  # one flat-earth conversion
 from .autopilot_params import ParamTable, param_id
 from .autopilot_rc import UINT16_MAX, RcInput
 from controller.pwm import CommandChannels
@@ -156,6 +159,7 @@ class AutopilotSim:
         self._params = ParamTable(self._sysid, legacy_param_names, params)
         self._mapping = self._build_mapping()
         self._origin = scenario.geodetic_origin or ardupilot.SITL_DEFAULT_HOME
+        self.ekf_origin = None  # (lat_deg, lon_deg, alt_m), set at the first GPS fix
         self._ekf = EkfModel(seed, ekf_delay_s)
         self._rc = RcInput()
         self._streams = st.Streams()
@@ -210,6 +214,7 @@ class AutopilotSim:
         self.armed = False
         self.mode = INITIALISING
         self._initialised = False
+        self.ekf_origin = None
         self._params.boot()
         self._mapping = self._build_mapping()
         self._rc.clear()
@@ -285,6 +290,8 @@ class AutopilotSim:
         self._outputs = self._compute_outputs()
         self._advance(now - self._t0)
         self._outputs = self._compute_outputs()
+        if self.ekf_origin is None and self.ekf_ready:
+            self._set_ekf_origin()
         self._send_due()
 
     def serve(self, duration_s: float | None = None) -> None:
@@ -293,6 +300,20 @@ class AutopilotSim:
         while duration_s is None or self.clock.now() - start < duration_s:
             self.pump(self.clock.now())
             self.clock.sleep(0.002)
+
+    def _set_ekf_origin(self) -> None:
+        """The first fix: the EKF origin is the estimated position now, moving or not."""
+        e = self._estimate()
+        lat, lon = ned_to_geodetic(e.north_m, e.east_m, self._origin)
+        self.ekf_origin = (lat, lon, float(self._origin[2]))
+        self._oneshot.append(st.GPS_GLOBAL_ORIGIN)
+
+    @property
+    def ekf_origin_ne(self) -> tuple[float, float] | None:
+        """The EKF origin in the scenario's frame (north, east metres), None before a fix."""
+        if self.ekf_origin is None:
+            return None
+        return geodetic_to_ned(self.ekf_origin[0], self.ekf_origin[1], self._origin)
 
     def _finish_init(self) -> None:
         """The end of start-up: Rover's late defaults (dead zones), then MANUAL."""
@@ -689,11 +710,21 @@ class AutopilotSim:
         self._conn.mav.attitude_send(self._time_boot_ms, 0.0, 0.0, e.psi_rad, 0.0, 0.0, e.r_radps)
 
     def _send_local_position(self) -> None:
-        if not self.ekf_ready:
+        if not self.ekf_ready or self.ekf_origin is None:
             return  # ArduPilot sends it only with a valid position
         e = self._estimate()
-        self._conn.mav.local_position_ned_send(self._time_boot_ms, e.north_m, e.east_m, 0.0,
+        lat, lon = ned_to_geodetic(e.north_m, e.east_m, self._origin)
+        north, east = geodetic_to_ned(lat, lon, self.ekf_origin)  # from the EKF origin
+        self._conn.mav.local_position_ned_send(self._time_boot_ms, north, east, 0.0,
                                                e.vn_mps, e.ve_mps, 0.0)
+
+    def _send_gps_global_origin(self) -> None:
+        if self.ekf_origin is None:
+            return  # as ArduPilot: nothing to say before the origin is set
+        lat, lon, alt = self.ekf_origin
+        self._conn.mav.gps_global_origin_send(int(round(lat * 1e7)), int(round(lon * 1e7)),
+                                              int(round(alt * 1000.0)),
+                                              int(self.boot_s * 1e6))
 
     def _send_global_position(self) -> None:
         if not self.ekf_ready:
@@ -758,5 +789,6 @@ class AutopilotSim:
         st.EKF_STATUS_REPORT: _send_ekf_status,
         st.RC_CHANNELS: _send_rc_channels,
         st.SERVO_OUTPUT_RAW: _send_servo_output,
+        st.GPS_GLOBAL_ORIGIN: _send_gps_global_origin,
         148: _send_autopilot_version,  # AUTOPILOT_VERSION, on request only
     }

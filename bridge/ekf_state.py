@@ -1,9 +1,9 @@
 """The autopilot's EKF messages -> our state [x, y, psi, u, v, r], and a short prediction.
 
-Positions come from LOCAL_POSITION_NED (the scenario's local frame is the EKF origin) or,
-when the scenario gives a geodetic origin, from GLOBAL_POSITION_INT converted to local NED
-around that origin (flat earth, as ArduPilot's own `Location` offsets: fine over a canal's
-few kilometres). Heading and yaw rate come from ATTITUDE; body velocities u, v are the NED
+Positions come from GLOBAL_POSITION_INT converted to local NED around the geodetic origin
+that places the scenario on the Earth (flat earth, as ArduPilot's own `Location` offsets:
+fine over a canal's few kilometres), or from LOCAL_POSITION_NED, which is measured from the
+EKF origin (wherever the first GPS fix came), moved by where that origin lies. Heading and yaw rate come from ATTITUDE; body velocities u, v are the NED
 velocity rotated by the heading. A state is stamped with the autopilot's `time_boot_ms` and
 with the bridge's clock when it arrived (the older of its two messages).
 """
@@ -94,13 +94,14 @@ def _heading_at(attitude, time_boot_s: float) -> float:
     return float(wrap_angle(psi))
 
 
-def state_from_local(attitude, local, received_s: float) -> EkfState:
-    """ATTITUDE + LOCAL_POSITION_NED (m, m/s) -> EkfState."""
+def state_from_local(attitude, local, received_s: float, offset_ne=(0.0, 0.0)) -> EkfState:
+    """ATTITUDE + LOCAL_POSITION_NED (m, m/s, from the EKF origin) -> EkfState, the position
+    moved by `offset_ne` (where the EKF origin lies in the frame wanted)."""
     t = local.time_boot_ms * 1e-3
     psi = _heading_at(attitude, t)
     u, v = body_velocity(local.vx, local.vy, psi)
-    return EkfState(t, float(received_s), float(local.x), float(local.y), psi, u, v,
-                    float(attitude.yawspeed))
+    return EkfState(t, float(received_s), float(local.x) + float(offset_ne[0]),
+                    float(local.y) + float(offset_ne[1]), psi, u, v, float(attitude.yawspeed))
 
 
 def state_from_global(attitude, position, origin, received_s: float) -> EkfState:

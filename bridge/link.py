@@ -29,8 +29,8 @@ from controller.errors import CanalnavError, InputError
 
 from bridge.ardupilot import MODE_NAMES, MODES, OVERRIDE_IGNORE, OVERRIDE_RELEASE
 from bridge.signing import rejected_for_signature
-from bridge.ekf_state import (EkfState, horizontal_position_ok, state_from_global,
-                              state_from_local)
+from bridge.ekf_state import (EkfState, geodetic_to_ned, horizontal_position_ok,
+                              state_from_global, state_from_local)
 
 os.environ["MAVLINK20"] = "1"  # before the dialect loads: MAVLink 2 (needed for signing)
 from pymavlink import mavutil  # noqa: E402
@@ -46,6 +46,8 @@ VEHICLE_TYPES_NOT_AUTOPILOT = {mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CO
                                mavlink.MAV_TYPE_GIMBAL, mavlink.MAV_TYPE_ADSB}
 MAX_MESSAGES_PER_PUMP = 5000  # a flood cannot starve the control loop for long
 POLL_S = 0.01
+GLOBAL_STALE_MS = 1000  # LOCAL_POSITION_NED stands in when GLOBAL_POSITION_INT is this old
+FRAME_TOLERANCE_M = 1.0  # LOCAL (from the EKF origin) and GLOBAL must agree this well
 RC_PARAM = re.compile(r"^(RCMAP_[A-Z]+|RC\d+_[A-Z]+)$")  # what the RC mapping is made of
 
 
@@ -100,6 +102,7 @@ class LinkCounters:
     rejected_signature: int = 0  # unsigned or badly signed while signing is on
     bad_data: int = 0  # bytes that did not parse (garbage, CRC errors)
     autopilot_restarts: int = 0  # time_boot_ms went backwards
+    frame_mismatches: int = 0  # LOCAL_POSITION_NED and GLOBAL_POSITION_INT disagreed
 
 
 def parse_url(url: str) -> tuple[str, int]:
@@ -156,7 +159,13 @@ class AutopilotLink:
         self.statustexts: deque[tuple[float, int, str]] = deque(maxlen=20)  # from the autopilot
         self._state: EkfState | None = None
         self._attitude = None  # (message, received_s)
-        self._position = None
+        self._position = None  # (source, message, received_s)
+        self._local = self._global = None  # the newest of each, (message, received_s)
+        self.ekf_origin = None  # (lat_deg, lon_deg, alt_m) from GPS_GLOBAL_ORIGIN
+        self._ekf_offset = None  # the EKF origin in the scenario's frame (north, east m)
+        self.position_source = None  # the message the state's position comes from
+        self.frame_mismatch_m = None  # newest LOCAL vs GLOBAL comparison
+        self.notices: deque[tuple[float, str]] = deque(maxlen=100)  # for the loop to log
         self._last_rx_s: float | None = None
         self._last_boot_ms: int | None = None
         self._acks: list[tuple[int, int, float]] = []  # (command, result, received_s)
@@ -261,6 +270,7 @@ class AutopilotLink:
         if self._last_boot_ms is not None and boot_ms + 500 < self._last_boot_ms:
             self.counters.autopilot_restarts += 1
             self._state = self._attitude = self._position = None
+            self._local = self._global = self._ekf_offset = self.ekf_origin = None
             self.ekf_flags = None
         self._last_boot_ms = boot_ms
 
@@ -272,25 +282,95 @@ class AutopilotLink:
     def _on_attitude(self, msg, now: float) -> None:
         self._attitude = (msg, now)
 
+    # Frames. The scenario is placed on the Earth by `geodetic_origin` (its (0, 0)); positions
+    # come from GLOBAL_POSITION_INT around it, or, while that is missing, from
+    # LOCAL_POSITION_NED (metres from the EKF origin, wherever the first GPS fix came) moved
+    # by where GPS_GLOBAL_ORIGIN puts the EKF origin. When both arrive they are compared.
+    # Without a geodetic origin the state stays in the EKF's own local frame (link tests;
+    # the onboard loop refuses to run that way).
     def _on_local_position_ned(self, msg, now: float) -> None:
+        self._local = (msg, now)
         if self.geodetic_origin is None:
-            self._position = (msg, now)
-            self._update_state()
+            self._use_position("LOCAL_POSITION_NED", msg, now)
+            return
+        self._check_frames()
+        global_fresh = (self._global is not None
+                        and msg.time_boot_ms - self._global[0].time_boot_ms <= GLOBAL_STALE_MS)
+        if self._ekf_offset is not None and not global_fresh:
+            self._use_position("LOCAL_POSITION_NED", msg, now)
 
     def _on_global_position_int(self, msg, now: float) -> None:
+        if self.geodetic_origin is None:
+            return
+        self._global = (msg, now)
+        self._check_frames()
+        self._use_position("GLOBAL_POSITION_INT", msg, now)
+
+    def _on_gps_global_origin(self, msg, now: float) -> None:
+        origin = (msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
+        if self.ekf_origin is not None and origin[:2] != self.ekf_origin[:2]:
+            self.notices.append((now, f"EKF origin moved to {origin[0]:.7f}, {origin[1]:.7f} "
+                                      f"(was {self.ekf_origin[0]:.7f}, {self.ekf_origin[1]:.7f})"))
+        self.ekf_origin = origin
+        self._ekf_offset = None
         if self.geodetic_origin is not None:
-            self._position = (msg, now)
-            self._update_state()
+            self._ekf_offset = geodetic_to_ned(origin[0], origin[1], self.geodetic_origin)
+
+    @property
+    def ekf_origin_ne(self) -> tuple[float, float] | None:
+        """Where GPS_GLOBAL_ORIGIN puts the EKF origin in the scenario's frame (m), or None."""
+        return self._ekf_offset
+
+    def _local_in_scenario(self, local) -> tuple[float, float]:
+        dn, de = self._ekf_offset
+        return float(local.x) + dn, float(local.y) + de
+
+    def _check_frames(self) -> None:
+        """Compare the newest LOCAL_POSITION_NED (moved by the EKF origin) with the newest
+        GLOBAL_POSITION_INT, carried to the same autopilot time with the velocity."""
+        if self._local is None or self._global is None or self._ekf_offset is None:
+            return
+        local, glob = self._local[0], self._global[0]
+        dt = (local.time_boot_ms - glob.time_boot_ms) * 1e-3
+        if abs(dt) > 0.2:
+            return
+        n, e = geodetic_to_ned(glob.lat * 1e-7, glob.lon * 1e-7, self.geodetic_origin)
+        n, e = n + glob.vx * 0.01 * dt, e + glob.vy * 0.01 * dt
+        ln, le = self._local_in_scenario(local)
+        miss = math.hypot(ln - n, le - e)
+        was_bad = self.frame_mismatch_m is not None and self.frame_mismatch_m > FRAME_TOLERANCE_M
+        self.frame_mismatch_m = miss
+        if miss > FRAME_TOLERANCE_M:
+            self.counters.frame_mismatches += 1
+            if not was_bad:
+                self.notices.append((self._global[1], self.frame_disagreement()))
+
+    def frame_disagreement(self) -> str:
+        """What the two position messages say, when they disagree (for the console and log)."""
+        local, glob = self._local[0], self._global[0]
+        ln, le = self._local_in_scenario(local)
+        n, e = geodetic_to_ned(glob.lat * 1e-7, glob.lon * 1e-7, self.geodetic_origin)
+        lat, lon = self.ekf_origin[:2]
+        return (f"LOCAL_POSITION_NED from the EKF origin {lat:.7f}, {lon:.7f} (GPS_GLOBAL_ORIGIN) "
+                f"puts the boat at x {ln:.1f} y {le:.1f} m, GLOBAL_POSITION_INT at x {n:.1f} "
+                f"y {e:.1f} m: {self.frame_mismatch_m:.1f} m apart")
+
+    def _use_position(self, source: str, msg, now: float) -> None:
+        self.position_source = source
+        self._position = (source, msg, now)
+        self._update_state()
 
     def _update_state(self) -> None:
         if self._attitude is None or self._position is None:
             return
-        (att, t_att), (pos, t_pos) = self._attitude, self._position
+        (att, t_att), (source, pos, t_pos) = self._attitude, self._position
         received = min(t_att, t_pos)
-        if self.geodetic_origin is None:
+        if source == "GLOBAL_POSITION_INT":
+            self._state = state_from_global(att, pos, self.geodetic_origin, received)
+        elif self.geodetic_origin is None:
             self._state = state_from_local(att, pos, received)
         else:
-            self._state = state_from_global(att, pos, self.geodetic_origin, received)
+            self._state = state_from_local(att, pos, received, self._ekf_offset)
 
     def _on_ekf_status_report(self, msg, now: float) -> None:
         self.ekf_flags = int(msg.flags)
@@ -518,6 +598,23 @@ class AutopilotLink:
                             "ArduPilot sets some parameters (the RC dead zones) only at the end "
                             "of its start-up, so the bridge waits for it")
         return self.heartbeat
+
+    def wait_ekf_origin(self, timeout_s: float = 5.0):
+        """Ask for GPS_GLOBAL_ORIGIN (MAV_CMD_REQUEST_MESSAGE) until it comes; the EKF origin
+        (lat, lon, alt), or None if it did not come within `timeout_s`."""
+        deadline = self.clock.now() + timeout_s
+        while self.ekf_origin is None and self.clock.now() < deadline:
+            self.command_long(mavlink.MAV_CMD_REQUEST_MESSAGE,
+                              mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN, timeout_s=0.5, retries=1)
+            self.wait_until(lambda: self.ekf_origin is not None,
+                            max(0.0, min(1.0, deadline - self.clock.now())))
+        return self.ekf_origin
+
+    def pop_notices(self) -> list[tuple[float, str]]:
+        """What the link noticed about the frames since the last call (bridge time, text)."""
+        out = list(self.notices)
+        self.notices.clear()
+        return out
 
     def wait_position_ok(self, timeout_s: float) -> EkfState:
         """Wait until the EKF reports a usable horizontal position and a fresh state exists."""

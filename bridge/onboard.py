@@ -60,6 +60,8 @@ class BridgeOptions:
     ekf_timeout_s: float = 120.0
     heartbeat_timeout_s: float = 30.0
     startup_timeout_s: float = 60.0  # for the autopilot to finish its start-up
+    origin: tuple | None = None  # (lat_deg, lon_deg, alt_m) of the scenario's (0, 0); else its [origin]
+    origin_timeout_s: float = 5.0  # for GPS_GLOBAL_ORIGIN
     stream_rate_hz: float = 20.0
     control_period_s: float = 0.1
     seed: int | None = None  # simulated LiDAR noise (default: the scenario's seed)
@@ -91,6 +93,69 @@ def _say(console, text: str) -> None:
         console.flush()
 
 
+NO_ORIGIN = (
+    "no geodetic origin: the scenario {source} has no [origin] and --origin was not given. "
+    "ArduPilot measures LOCAL_POSITION_NED from its EKF origin, which is wherever the boat was "
+    "at its first GPS fix, not the scenario's (0, 0); the bridge places the scenario on the "
+    "Earth instead. Give the latitude and longitude of the scenario's (0, 0): "
+    "[origin] lat_deg = ..., lon_deg = ... in the scenario file, or --origin LAT,LON[,ALT] "
+    "(against ArduPilot SITL or canalnav autopilot-sim with a scenario without [origin], "
+    "their default home: --origin {home})")
+
+
+def geodetic_origin(scenario, options: BridgeOptions):
+    """The scenario's place on the Earth: --origin, else its [origin]; InputError if none."""
+    from bridge.ardupilot import SITL_DEFAULT_HOME
+
+    origin = options.origin or scenario.geodetic_origin
+    if origin is None:
+        home = format_origin(SITL_DEFAULT_HOME)
+        raise InputError(NO_ORIGIN.format(source=scenario.path or scenario.name, home=home))
+    return tuple(float(v) for v in origin)
+
+
+def format_origin(origin) -> str:
+    """(lat, lon, alt) as `LAT,LON,ALT` for --origin (to 1e-7 degrees, about a centimetre)."""
+    return ",".join(f"{float(v):.7f}".rstrip("0").rstrip(".") for v in origin)
+
+
+def parse_origin(text: str) -> tuple[float, float, float]:
+    """`LAT,LON[,ALT]` (degrees, metres) -> (lat, lon, alt); InputError names the problem."""
+    parts = [p.strip() for p in str(text).split(",")]
+    if len(parts) not in (2, 3):
+        raise InputError(f"--origin {text!r}: expected LAT,LON or LAT,LON,ALT (degrees, metres)")
+    try:
+        values = [float(p) for p in parts] + ([0.0] if len(parts) == 2 else [])
+    except ValueError:
+        raise InputError(f"--origin {text!r}: not numbers (expected LAT,LON[,ALT])") from None
+    lat, lon, alt = values
+    if not all(math.isfinite(v) for v in values) or not -90 <= lat <= 90 or not -180 <= lon <= 180:
+        raise InputError(f"--origin {text!r}: latitude must lie in -90..90 and longitude in "
+                         "-180..180 degrees")
+    return lat, lon, alt
+
+
+def _check_ekf_origin(link, options, console) -> None:
+    """GPS_GLOBAL_ORIGIN: where the EKF origin is, and whether LOCAL_POSITION_NED moved by it
+    agrees with GLOBAL_POSITION_INT (refused if not)."""
+    from bridge.link import FRAME_TOLERANCE_M
+
+    origin = link.wait_ekf_origin(options.origin_timeout_s)
+    if origin is None:
+        _say(console, f"note: no GPS_GLOBAL_ORIGIN within {options.origin_timeout_s:g} s: "
+                      "positions from GLOBAL_POSITION_INT only, LOCAL_POSITION_NED not "
+                      "cross-checked")
+        return
+    n, e = link.ekf_origin_ne
+    _say(console, f"EKF origin: {origin[0]:.7f}, {origin[1]:.7f} ({n:.1f} m north, {e:.1f} m "
+                  "east of the scenario's (0, 0): where the boat was at its first GPS fix)")
+    link.frame_mismatch_m = None
+    link.wait_until(lambda: link.frame_mismatch_m is not None, 1.0)
+    if link.frame_mismatch_m is not None and link.frame_mismatch_m > FRAME_TOLERANCE_M:
+        raise PreflightRefused([link.frame_disagreement() + "; the autopilot's frames disagree"])
+    link.pop_notices()
+
+
 def _rc_summary(m) -> str:
     def one(c):
         rev = ", reversed" if c.reversed else ""
@@ -116,7 +181,7 @@ def prepare_link(link, scenario, options: BridgeOptions = BridgeOptions(), conso
     from bridge import preflight
     from controller.pwm import CommandChannels
 
-    link.geodetic_origin = scenario.geodetic_origin
+    link.geodetic_origin = geodetic_origin(scenario, options)
     hb = link.wait_heartbeat(options.heartbeat_timeout_s)
     _say(console, f"autopilot: system {hb.system_id} component {hb.component_id}, "
                   f"{'boat' if hb.type == preflight.MAV_TYPE_SURFACE_BOAT else 'rover'}, "
@@ -142,6 +207,7 @@ def prepare_link(link, scenario, options: BridgeOptions = BridgeOptions(), conso
     _say(console, _rc_summary(link.rc_mapping))
     link.wait_position_ok(options.ekf_timeout_s)
     _say(console, "EKF: horizontal position usable")
+    _check_ekf_origin(link, options, console)
     # again, just before taking control: a parameter may have changed while we waited
     again = _read_rc_params(link)
     changed = sorted(n for n in set(params) | set(again) if params.get(n) != again.get(n))
@@ -259,10 +325,13 @@ class OnboardLoop:
         mapping follows); a change that makes the autopilot ignore us is a fault."""
         from bridge import preflight
 
+        hb = self.link.heartbeat
+        for _, notice in self.link.pop_notices():
+            self.log.event(t, notice, hb.mode if hb else "", hb.armed if hb else None)
+            self._say(f"bridge: {notice}")
         changes = self.link.pop_param_changes()
         if not changes:
             return None
-        hb = self.link.heartbeat
         for change in changes:
             self.log.event(t, change.describe(), hb.mode if hb else "", hb.armed if hb else None)
             self._say(f"bridge: {change.describe()}")
@@ -425,6 +494,11 @@ def run_bridge(options: BridgeOptions, console=sys.stderr) -> BridgeResult:
         if value is not None and not (math.isfinite(value) and value > 0):
             raise InputError(f"{name} must be a positive number, got {value!r}")
     scenario = load_scenario(options.scenario)
+    origin = geodetic_origin(scenario, options)  # before connecting: refuse at once
+    if options.origin and scenario.geodetic_origin and tuple(options.origin) != tuple(
+            scenario.geodetic_origin):
+        _say(console, f"bridge: --origin {format_origin(options.origin)} replaces the "
+                      "scenario's [origin]")
     key = None
     if options.signing_key is not None:
         from bridge.signing import load_signing_key
@@ -439,7 +513,7 @@ def run_bridge(options: BridgeOptions, console=sys.stderr) -> BridgeResult:
         component_id=options.component_id, target_system=options.target_system,
         signing_key=key, tlog_path=None if log_dir is None else log_dir / "mavlink.tlog",
         link_timeout_s=options.link_timeout_s, stale_s=options.stale_s,
-        geodetic_origin=scenario.geodetic_origin)
+        geodetic_origin=origin)
     log = None
     try:
         controller = NmpcController(scenario)

@@ -466,11 +466,19 @@ def test_same_seed_same_messages(make_rig):
 
 def test_state_messages_match_the_truth(make_rig):
     rig = make_rig(ekf_delay_s=0.5)
+    org = rig.wait("GPS_GLOBAL_ORIGIN", timeout_s=1.0)  # sent when the EKF sets its origin
     lp = rig.wait("LOCAL_POSITION_NED", timeout_s=1.0)
+    x_lp = rig.sim.true_state
     gp = rig.wait("GLOBAL_POSITION_INT", timeout_s=1.0)
     att = rig.wait("ATTITUDE", timeout_s=1.0)
     x = rig.sim.true_state
-    assert abs(lp.x - x[0]) < 1.0 and abs(lp.y - x[1]) < 1.0 and abs(lp.vx - x[3]) < 0.3
+    # the EKF origin is where the boat was at the fix (0.5 s at 1 m/s from (0, 2)), and
+    # LOCAL_POSITION_NED is measured from it
+    n0, e0 = rig.sim.ekf_origin_ne
+    assert n0 == pytest.approx(0.5, abs=0.7) and e0 == pytest.approx(2.0, abs=0.7)
+    assert (org.latitude, org.longitude) == tuple(round(v * 1e7) for v in rig.sim.ekf_origin[:2])
+    assert abs(lp.x - (x_lp[0] - n0)) < 0.3 and abs(lp.y - (x_lp[1] - e0)) < 0.3
+    assert abs(lp.vx - x[3]) < 0.3
     lat0, lon0, alt0 = ardupilot.SITL_DEFAULT_HOME  # straight.toml has no origin
     north = math.radians(gp.lat * 1e-7 - lat0) * 6378137.0
     assert abs(north - x[0]) < 1.0 and gp.alt == round(alt0 * 1000) and gp.relative_alt == 0

@@ -88,6 +88,38 @@ def rig(straight, tmp_path):
         r.close()
 
 
+# -- 2. the frame is the world's ---------------------------------------------------------------
+def test_positions_are_the_worlds_whatever_the_ekf_origin(rig, straight):
+    """The boat moves (1 m/s) before its first fix at 5 s: the EKF origin is ~5 m along the
+    canal. Placed on the Earth through the geodetic origin, the bridge's state is the truth;
+    without an origin it refuses, saying how to give one."""
+    from bridge.ardupilot import SITL_DEFAULT_HOME
+    from controller.errors import InputError
+
+    no_origin = replace(straight, geodetic_origin=None)  # the simulator puts it at SITL's home
+    r = rig(scenario=no_origin)
+    with pytest.raises(InputError, match=r"no geodetic origin.*\[origin\].*--origin LAT,LON"):
+        r.prepare()
+    r.prepare(origin=SITL_DEFAULT_HOME)
+    north, east = r.autopilot.ekf_origin_ne
+    assert north > 3.0 and abs(east - 2.0) < 0.7  # where the boat was at the fix
+    assert "EKF origin" in r.console.getvalue()
+    for _ in range(3):
+        r.link.wait_until(lambda: False, 1.0)
+        x, y = r.link.state.x, r.link.state.y
+        truth = r.autopilot.true_state
+        assert abs(x - truth[0]) < 0.8 and abs(y - truth[1]) < 0.8, (x, y, truth[:2])
+    # LOCAL_POSITION_NED alone (no GLOBAL_POSITION_INT) is converted with GPS_GLOBAL_ORIGIN
+    assert r.link.request_streams(20, messages=("GLOBAL_POSITION_INT",)) == {
+        "GLOBAL_POSITION_INT": 0}
+    r.link.command_long(511, 33, -1)  # GLOBAL_POSITION_INT off
+    r.link.wait_until(lambda: False, 3.0)
+    assert r.link.position_source == "LOCAL_POSITION_NED"
+    x, y = r.link.state.x, r.link.state.y
+    truth = r.autopilot.true_state
+    assert abs(x - truth[0]) < 0.8 and abs(y - truth[1]) < 0.8, (x, y, truth[:2])
+
+
 # -- 1. parameters after start-up ------------------------------------------------------------
 def test_rc_parameters_are_read_after_start_up_so_small_steering_moves_the_rudder(rig):
     r = rig()
