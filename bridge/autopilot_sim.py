@@ -249,6 +249,11 @@ class AutopilotSim:
         """Seconds since the last (re)boot: time_boot_ms / 1000."""
         return self.time_s - self._boot_t
 
+    def boot_to_clock(self, time_boot_s: float) -> float:
+        """The clock time at which this autopilot's time since boot was `time_boot_s` (what
+        a message stamped with it describes): for tests of the bridge's time keeping."""
+        return self._t0 + self._boot_t + float(time_boot_s)
+
     @property
     def params(self) -> dict:
         return dict(self._params.values)

@@ -7,9 +7,14 @@ signing key is set, counts and skips garbage, and keeps the newest heartbeat, EK
 parameters and command acknowledgements. It measures the link delay with TIMESYNC (which
 ArduPilot answers) and logs every message sent and received to a .tlog as it goes.
 
+Times: every message is read as it arrives (the waits, `idle` included, wake on data with a
+real clock) and keeps its arrival time; the autopilot's `time_boot_ms` is mapped to the
+bridge's clock (`boot_clock`: TIMESYNC, checked against the arrivals), so a state's age is
+the time since the autopilot made it, link delay included.
+
 Nothing here blocks on the wall clock: `pump()` reads what is pending and returns, and every
-wait loops over `pump()` and `clock.sleep`, so a `VirtualClock` can run a simulated autopilot
-in the same thread.
+wait loops over `pump()` and the clock, so a `VirtualClock` can run a simulated autopilot in
+the same thread.
 """
 
 from __future__ import annotations
@@ -28,6 +33,7 @@ from pathlib import Path
 from controller.errors import CanalnavError, InputError
 
 from bridge.ardupilot import MODE_NAMES, MODES, OVERRIDE_IGNORE, OVERRIDE_RELEASE
+from bridge.boot_clock import BootClock
 from bridge.signing import rejected_for_signature
 from bridge.ekf_state import (EkfState, geodetic_to_ned, horizontal_position_ok,
                               state_from_global, state_from_local)
@@ -172,7 +178,7 @@ class AutopilotLink:
         self._hb_due = -math.inf
         self._ts_due = -math.inf
         self._timesync_pending: dict[int, float] = {}
-        self._timesync_delays: deque[float] = deque(maxlen=9)
+        self.boot_clock = BootClock()  # the autopilot's time since boot -> our clock
         self._ack_delays: deque[float] = deque(maxlen=9)
         self._statustext_id = 0
         self._epoch_us = int(time.time() * 1e6) - int(clock.now() * 1e6)
@@ -252,7 +258,10 @@ class AutopilotLink:
         now = self.clock.now()
         self._last_rx_s = now
         self.counters.received += 1
-        self._check_restart(getattr(msg, "time_boot_ms", None))
+        boot_ms = getattr(msg, "time_boot_ms", None)
+        self._check_restart(boot_ms)
+        if boot_ms is not None:
+            self.boot_clock.message(boot_ms * 1e-3, now)
         handler = getattr(self, f"_on_{kind.lower()}", None)
         if handler is not None:
             handler(msg, now)
@@ -271,6 +280,7 @@ class AutopilotLink:
             self.counters.autopilot_restarts += 1
             self._state = self._attitude = self._position = None
             self._local = self._global = self._ekf_offset = self.ekf_origin = None
+            self.boot_clock.reset()
             self.ekf_flags = None
         self._last_boot_ms = boot_ms
 
@@ -432,7 +442,7 @@ class AutopilotLink:
             return
         sent = self._timesync_pending.pop(int(msg.ts1), None)
         if sent is not None:
-            self._timesync_delays.append(max(0.0, now - sent) / 2.0)
+            self.boot_clock.timesync(sent, now, msg.tc1 * 1e-9)
 
     # -- state ---------------------------------------------------------------------------------
     @property
@@ -453,8 +463,15 @@ class AutopilotLink:
 
     @property
     def state_age_s(self) -> float:
-        """Bridge-clock age of the newest state (inf if none)."""
-        return math.inf if self._state is None else self.clock.now() - self._state.received_s
+        """Age of the newest state on the bridge's clock: now less when the autopilot made
+        it (its time_boot_ms mapped by `boot_clock`), so it includes the link's delay; inf if
+        there is no state."""
+        if self._state is None:
+            return math.inf
+        made = self.boot_clock.to_bridge(self._state.time_boot_s)
+        if made is None:
+            made = self._state.received_s
+        return max(0.0, self.clock.now() - made)
 
     @property
     def state_fresh(self) -> bool:
@@ -468,8 +485,7 @@ class AutopilotLink:
     def link_delay_s(self) -> float:
         """One-way delay: half the median TIMESYNC round trip (else of the COMMAND_ACK round
         trips, which include the autopilot's handling); 0 before any was measured."""
-        samples = self._timesync_delays or self._ack_delays
-        return statistics.median(samples) if samples else 0.0
+        return self.boot_clock.delay_s
 
     # -- sending -------------------------------------------------------------------------------
     def _on_send(self, msg) -> None:
@@ -557,9 +573,30 @@ class AutopilotLink:
             self.pump()
             if predicate():
                 return True
-            if self.clock.now() >= deadline:
+            remaining = deadline - self.clock.now()
+            if remaining <= 0:
                 return False
-            self.clock.sleep(POLL_S)
+            self._wait(min(POLL_S, remaining))
+
+    def idle(self, seconds: float) -> None:
+        """Let `seconds` pass reading every message as it arrives (each keeps its arrival
+        time): how the loop waits between control steps."""
+        deadline = self.clock.now() + seconds
+        while True:
+            self.pump()
+            remaining = deadline - self.clock.now()
+            if remaining <= 1e-9:
+                return
+            self._wait(min(POLL_S, remaining))
+
+    def _wait(self, seconds: float) -> None:
+        """Sleep up to `seconds`, waking when the link has data (a real clock's select)."""
+        fd = getattr(self._conn, "fd", None)
+        wait = getattr(self.clock, "wait_readable", None)
+        if wait is not None and isinstance(fd, int) and fd >= 0:
+            wait(fd, seconds)
+        else:
+            self.clock.sleep(seconds)
 
     def wait_heartbeat(self, timeout_s: float = 30.0) -> Heartbeat:
         """Wait for a live autopilot heartbeat; it must come from a boat or a rover."""
@@ -647,6 +684,7 @@ class AutopilotLink:
             if self.wait_until(answered, timeout_s):
                 result, t = found[0]
                 self._ack_delays.append(max(0.0, t - sent) / 2.0)
+                self.boot_clock.fallback_delay_s = statistics.median(self._ack_delays)
                 return result
         return None
 

@@ -316,7 +316,7 @@ class OnboardLoop:
             next_t += period
             wait = next_t - self.clock.now()
             if wait > 1e-9:
-                self.clock.sleep(wait)
+                self.link.idle(wait)  # messages are read (and stamped) as they arrive
             else:
                 next_t = self.clock.now()
 
@@ -386,8 +386,7 @@ class OnboardLoop:
 
     # -- stopping ------------------------------------------------------------------------------
     def _pause(self, seconds: float) -> None:
-        self.clock.sleep(seconds)
-        self.link.pump()
+        self.link.idle(seconds)
 
     def _stop(self, reason: str, severity: int) -> None:
         """Neutral, release, HOLD (if the mode is ours), then tell the ground station."""

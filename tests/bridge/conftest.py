@@ -118,7 +118,8 @@ class FakeAutopilot:
                 self.mav.param_value_send(name.encode(), float(self.params[name]),
                                           m.MAV_PARAM_TYPE_REAL32, len(self.params), 0)
         elif kind == "TIMESYNC" and msg.tc1 == 0 and self.answer_timesync and not self.mute:
-            self.mav.timesync_send(int(self.clock.now() * 1e9) + 1, msg.ts1)
+            # as ArduPilot: its time since boot, the clock of time_boot_ms
+            self.mav.timesync_send(int((self.clock.now() - self.boot_t) * 1e9) + 1, msg.ts1)
         elif kind == "COMMAND_LONG":
             result = self.ack_results.get(msg.command, m.MAV_RESULT_ACCEPTED)
             if result == m.MAV_RESULT_ACCEPTED:

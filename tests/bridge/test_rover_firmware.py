@@ -120,6 +120,32 @@ def test_positions_are_the_worlds_whatever_the_ekf_origin(rig, straight):
     assert abs(x - truth[0]) < 0.8 and abs(y - truth[1]) < 0.8, (x, y, truth[:2])
 
 
+# -- 3. message times -----------------------------------------------------------------------
+def test_link_delay_and_state_age_are_measured_over_a_slow_lossy_link(rig, tmp_path):
+    """150 ms each way and 5 % loss: the delay reported is within 20 ms of 150, and each
+    step's state age is the real one (the step's time less the autopilot time its state
+    describes), not the time since the loop last read the link."""
+    r = rig(latency_s=0.15, loss=0.05)
+    result, rows, _ = run_loop(r, tmp_path, Constant((20.0, 0.0)), duration_s=20.0)
+    assert result.reason == "time limit", result
+    steps = [row for row in rows if row["x_m"]][20:]
+    delays = np.array([float(row["link_delay_s"]) for row in steps])
+    assert np.all(np.abs(delays - 0.150) <= 0.020), (delays.min(), delays.max())
+    t0 = r.loop._t0
+    ages = np.array([float(row["state_age_s"]) for row in steps])
+    real = np.array([t0 + float(row["time_s"]) - r.autopilot.boot_to_clock(float(row["ekf_time_s"]))
+                     for row in steps])
+    assert np.all(np.abs(ages - real) <= 0.015), np.abs(ages - real).max()
+    assert 0.15 <= real.mean() <= 0.25  # 150 ms of link and up to 50 ms between messages
+    # the prediction is carried over that age and the command's own trip
+    for row in steps[::25]:
+        dt = float(row["state_age_s"]) + float(row["link_delay_s"])
+        moved = np.hypot(float(row["pred_x_m"]) - float(row["x_m"]),
+                         float(row["pred_y_m"]) - float(row["y_m"]))
+        speed = np.hypot(float(row["u_mps"]), float(row["v_mps"]))
+        assert moved == pytest.approx(speed * dt, rel=0.02, abs=1e-3)
+
+
 # -- 1. parameters after start-up ------------------------------------------------------------
 def test_rc_parameters_are_read_after_start_up_so_small_steering_moves_the_rudder(rig):
     r = rig()
@@ -180,6 +206,7 @@ def run_loop(r, tmp_path, controller, at_steps=None, **options):
 
     with (tmp_path / "steps.csv").open() as fh:
         rows = list(csv.DictReader(fh))
+    r.loop = loop
     return result, rows, outputs
 
 
