@@ -75,13 +75,12 @@ class PwmChannel:
             off, span, sign = self.trim - self.dz - pwm, down, -1.0
         else:
             return 0.0
-        if self.units is None:
-            value = off / span
-        else:  # integer PWM, integer division as the firmware's
-            value = (self.units * int(round(off))) // span / self.units
         if self.reversed:
             sign = -sign
-        return 100.0 * sign * value
+        if self.units is None:
+            return 100.0 * sign * off / span
+        counts = (self.units * int(round(off))) // span  # integer division, as the firmware's
+        return sign * 100.0 * counts / self.units
 
     def to_pwm(self, percent: float) -> int:
         """The PWM whose reading (`to_percent`) is the percent meant, to the reading's
@@ -91,22 +90,22 @@ class PwmChannel:
         throttle, 0.011 % steering) is sent as trim."""
         if not math.isfinite(percent):
             raise ValueError(f"{self.name}: command {percent!r} is not a number")
-        v = max(-100.0, min(100.0, float(percent))) / 100.0
+        p = max(-100.0, min(100.0, float(percent)))
         if self.reversed:
-            v = -v
+            p = -p
         up, down = self._spans()
-        span = up if v > 0 else down
+        span = up if p > 0 else down
         if self.units is None:
-            d = int(round(abs(v) * span))
-            if self.dz and v != 0.0:
+            d = int(round(abs(p) * span / 100.0))
+            if self.dz and p != 0.0:
                 d = max(d, 1)
         else:
-            k = int(abs(v) * self.units + 0.5)  # the reading meant, in whole units
+            k = int(abs(p) * self.units / 100.0 + 0.5 + 1e-9)  # the reading meant, whole units
             d = -(-k * span // self.units) if k else 0  # ceil: reads at least k
         d = min(d, span)
         if d == 0:
             return self.trim
-        return self.trim + self.dz + d if v > 0 else self.trim - self.dz - d
+        return self.trim + self.dz + d if p > 0 else self.trim - self.dz - d
 
 
 def rc_input(channel: int, params, units: int | None = None) -> PwmChannel:
@@ -153,7 +152,8 @@ class CommandChannels:
                 raise ValueError(f"{name} = {ch} is not a channel 1..16")
         if steer == throttle:
             raise ValueError(f"RCMAP_ROLL and RCMAP_THROTTLE are both channel {steer}")
-        return cls(rc_input(steer, params), rc_input(throttle, params))
+        return cls(rc_input(steer, params, STEERING_UNITS),
+                   rc_input(throttle, params, THROTTLE_UNITS))
 
     @classmethod
     def from_servo_params(cls, params) -> "CommandChannels":

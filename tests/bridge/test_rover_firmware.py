@@ -146,6 +146,18 @@ def test_link_delay_and_state_age_are_measured_over_a_slow_lossy_link(rig, tmp_p
         assert moved == pytest.approx(speed * dt, rel=0.02, abs=1e-3)
 
 
+# -- 4. throttle in whole percent ---------------------------------------------------------------
+def test_throttle_reaches_the_autopilot_as_the_whole_percent_meant(rig):
+    """Rover truncates its throttle input to whole percent: each command arrives as the
+    nearest whole percent (the identification levels included), never a point low."""
+    r = rig()
+    r.prepare()
+    for nT in (31.0, 34.9, 38.6, 41.0, 50.6, 39.4, 20.0, 42.0, 7.5, 0.7, -12.3, -99.6):
+        out_nT, _ = r.command(nT, 0.0, seconds=0.2)
+        meant = float(np.sign(nT) * np.floor(abs(nT) + 0.5))
+        assert out_nT == meant, (nT, out_nT)
+
+
 # -- 1. parameters after start-up ------------------------------------------------------------
 def test_rc_parameters_are_read_after_start_up_so_small_steering_moves_the_rudder(rig):
     r = rig()

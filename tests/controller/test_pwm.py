@@ -54,3 +54,26 @@ def test_servo_outputs_by_function_and_sense():
     assert ch.to_commands({}) == (0.0, 0.0)
     with pytest.raises(ValueError, match="SERVOn_FUNCTION = 26"):
         CommandChannels.from_servo_params({"SERVO3_FUNCTION": 70})
+
+
+@pytest.mark.parametrize("dz", [0, 30, 47])
+@pytest.mark.parametrize("lo, trim, hi", [(1100, 1500, 1900), (982, 1511, 2006)])
+def test_throttle_reads_the_whole_percent_meant_and_steering_the_nearest_step(dz, lo, trim, hi):
+    """Rover truncates its throttle reading to whole percent and its steering to 1/4500: the
+    PWM sent reads as the nearest whole percent of throttle for every command, and steering
+    within one microsecond's worth above the command."""
+    thr = PwmChannel(3, lo, hi, trim, dz, False, THROTTLE_UNITS)
+    steer = PwmChannel(1, lo, hi, trim, dz, True, STEERING_UNITS)
+    us_pct = 100.0 / min(hi - trim - dz, trim - dz - lo)  # one microsecond of travel
+    for c in np.round(np.arange(-100.0, 100.05, 0.1), 1):
+        meant = float(np.sign(c) * np.floor(abs(c) + 0.5))
+        assert thr.to_percent(thr.to_pwm(c)) == meant, c
+        read = steer.to_percent(steer.to_pwm(c))
+        if abs(c) * STEERING_UNITS / 100 >= 0.5:
+            half_unit = 50.0 / STEERING_UNITS
+            assert np.sign(read) == np.sign(c), (c, read)
+            assert -half_unit - 1e-9 <= abs(read) - abs(c) <= us_pct + half_unit, (c, read)
+    # what the firmware does with a PWM: integer division, toward zero
+    assert thr.to_percent(trim + dz + 1) == 0.0  # 1 us is less than 1 % of travel here
+    assert thr.to_percent(trim - dz - 1) == 0.0
+    assert thr.to_percent(hi) == 100.0 and thr.to_percent(lo) == -100.0
