@@ -98,9 +98,9 @@ NO_ORIGIN = (
     "ArduPilot measures LOCAL_POSITION_NED from its EKF origin, which is wherever the boat was "
     "at its first GPS fix, not the scenario's (0, 0); the bridge places the scenario on the "
     "Earth instead. Give the latitude and longitude of the scenario's (0, 0): "
-    "[origin] lat_deg = ..., lon_deg = ... in the scenario file, or --origin LAT,LON[,ALT] "
+    "[origin] lat_deg = ..., lon_deg = ... in the scenario file, or --origin=LAT,LON[,ALT] "
     "(against ArduPilot SITL or canalnav autopilot-sim with a scenario without [origin], "
-    "their default home: --origin {home})")
+    "their default home: --origin={home}; with '=' since it starts with a minus)")
 
 
 def geodetic_origin(scenario, options: BridgeOptions):
@@ -496,7 +496,7 @@ def run_bridge(options: BridgeOptions, console=sys.stderr) -> BridgeResult:
     origin = geodetic_origin(scenario, options)  # before connecting: refuse at once
     if options.origin and scenario.geodetic_origin and tuple(options.origin) != tuple(
             scenario.geodetic_origin):
-        _say(console, f"bridge: --origin {format_origin(options.origin)} replaces the "
+        _say(console, f"bridge: --origin={format_origin(options.origin)} replaces the "
                       "scenario's [origin]")
     key = None
     if options.signing_key is not None:

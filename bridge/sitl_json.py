@@ -335,9 +335,13 @@ def sitl_command(parm_file: Path, port: int = DEFAULT_PORT, host: str = DEFAULT_
     """The sim_vehicle.py command that starts ArduRover (boat) on this backend.
 
     `--model JSON:IP` names where SITL sends its packets; instance I sends to 9002 + 10 I,
-    any other port goes to the SITL binary as `--sim-port-out` (through `-A`). Home is the
-    scenario's geodetic origin when it has one (positions are NED metres from home).
+    any other port goes to the SITL binary as `--sim-port-out` (through `-A`). Home, where
+    the scenario's (0, 0) is on the Earth (positions are NED metres from it), is the
+    scenario's geodetic origin, else SITL's own default (given explicitly, so that the
+    bridge's `--origin` can match it).
     """
+    from bridge.ardupilot import SITL_DEFAULT_HOME
+
     target = "127.0.0.1" if host in ("", "127.0.0.1") else host
     if target in ("0.0.0.0", "::"):
         target = "<this machine's address>"
@@ -349,7 +353,20 @@ def sitl_command(parm_file: Path, port: int = DEFAULT_PORT, host: str = DEFAULT_
             parts.append(f"-I {instance}")
         else:
             parts.append(f'-A "--sim-port-out={port}"')
-    if geodetic_origin is not None:
-        lat, lon, alt = geodetic_origin
-        parts.append(f"--custom-location={lat:.8f},{lon:.8f},{alt:g},0")
+    lat, lon, alt = geodetic_origin if geodetic_origin is not None else SITL_DEFAULT_HOME
+    parts.append(f"--custom-location={lat:.8f},{lon:.8f},{alt:g},0")
+    return " ".join(parts)
+
+
+def bridge_command(scenario_file, geodetic_origin: tuple | None) -> str:
+    """The `canalnav bridge` command that drives that SITL through the MAVProxy output
+    sim_vehicle.py opens on udp 14550, in the frame SITL's home puts the scenario in: a
+    scenario without [origin] needs `--origin` at SITL's default home."""
+    from bridge.ardupilot import SITL_DEFAULT_HOME
+    from bridge.onboard import format_origin
+
+    parts = ["canalnav bridge --connect udp:127.0.0.1:14550", f"--scenario {scenario_file}"]
+    if geodetic_origin is None:
+        parts.append(f"--origin={format_origin(SITL_DEFAULT_HOME)}")  # "=": it starts with a minus
+    parts.append("--mode MANUAL --arm")
     return " ".join(parts)

@@ -24,9 +24,10 @@ def register(sub) -> None:
                    help="sim (the scenario's canal seen at the reported pose; default) or "
                    "replay:DIR (one .npy/.bin scan per file, named by its timestamp in ns)")
     p.add_argument("--origin", metavar="LAT,LON[,ALT]",
-                   help="where the scenario's (0, 0) is on the Earth (degrees, metres); "
-                   "default: the scenario's [origin]. One of the two is required: ArduPilot's "
-                   "local frame starts wherever its first GPS fix came")
+                   help="where the scenario's (0, 0) is on the Earth (degrees, metres; write "
+                   "--origin=-35.36,149.17 when the latitude is negative); default: the "
+                   "scenario's [origin]. One of the two is required: ArduPilot's local frame "
+                   "starts wherever its first GPS fix came")
     p.add_argument("--arm", action="store_true", help="arm the autopilot (never without this)")
     p.add_argument("--mode", metavar="NAME",
                    help="switch to this mode (e.g. MANUAL) before driving, HOLD on a failsafe; "

@@ -346,7 +346,7 @@ def test_cli_bad_input_is_one_clear_line(capsys, tmp_path):
     assert main(["bridge", "--scenario", str(STRAIGHT), "--connect", "udpout:127.0.0.1:9"]) == 2
     err = capsys.readouterr().err
     assert "no geodetic origin: the scenario" in err and "[origin] lat_deg" in err
-    assert "--origin -35.363261,149.16523,584" in err and len(err.strip().splitlines()) == 1
+    assert "--origin=-35.363261,149.16523,584" in err and len(err.strip().splitlines()) == 1
     for bad in ("52", "52,x", "91,4", "52,4,0,1"):
         assert main(["bridge", "--scenario", str(STRAIGHT), "--connect", "udpout:127.0.0.1:9",
                      "--origin", bad]) == 2

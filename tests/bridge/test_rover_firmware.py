@@ -98,7 +98,7 @@ def test_positions_are_the_worlds_whatever_the_ekf_origin(rig, straight):
 
     no_origin = replace(straight, geodetic_origin=None)  # the simulator puts it at SITL's home
     r = rig(scenario=no_origin)
-    with pytest.raises(InputError, match=r"no geodetic origin.*\[origin\].*--origin LAT,LON"):
+    with pytest.raises(InputError, match=r"no geodetic origin.*\[origin\].*--origin=LAT,LON"):
         r.prepare()
     r.prepare(origin=SITL_DEFAULT_HOME)
     north, east = r.autopilot.ekf_origin_ne
