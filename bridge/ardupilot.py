@@ -43,6 +43,13 @@ DEFAULT_PARAMS = {
     # A running Rover: the steering and throttle channels have a dead zone of 30 us.
     "RC1_DZ": 30.0,
     "RC3_DZ": 30.0,
+    # Servo outputs (SRV_Channel): 1100-1900 us, trim 1500; output 1 steers (GroundSteering,
+    # 26) and output 3 throttles (Throttle, 70), Rover's defaults; the others are disabled.
+    **{f"SERVO{n}_{k}": v for n in range(1, 17)
+       for k, v in (("FUNCTION", 0.0), ("MIN", 1100.0), ("MAX", 1900.0), ("TRIM", 1500.0),
+                    ("REVERSED", 0.0))},
+    "SERVO1_FUNCTION": 26.0,
+    "SERVO3_FUNCTION": 70.0,
 }
 
 ROVER_INIT_DEAD_ZONE_US = 30.0

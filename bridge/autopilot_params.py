@@ -38,6 +38,7 @@ class ParamTable:
     def __init__(self, system_id: int = 1, legacy: bool = False, overrides: dict | None = None):
         self.legacy = legacy
         self.values = default_params(system_id, legacy)
+        self.defaults = dict(self.values)  # as PARM logs them beside the value
         self.stored: set[str] = set()
         for name, value in (overrides or {}).items():
             if name not in self.values:

@@ -144,7 +144,7 @@ class AutopilotSim:
                  signing_key: bytes | None = None, params: dict | None = None,
                  ekf_delay_s: float = 20.0, legacy_param_names: bool = False,
                  work_dir=None, physics_step_s: float = 0.01, system_id: int = 1,
-                 init_s: float = 3.0):
+                 init_s: float = 3.0, log_dir=None):
         if not physics_step_s > 0:
             raise InputError(f"physics step must be positive, got {physics_step_s}")
         if not (math.isfinite(init_s) and init_s >= 0):
@@ -158,6 +158,7 @@ class AutopilotSim:
         self._sysid = int(system_id)
         self._params = ParamTable(self._sysid, legacy_param_names, params)
         self._mapping = self._build_mapping()
+        self._servos = self._build_servos()
         self._origin = scenario.geodetic_origin or ardupilot.SITL_DEFAULT_HOME
         self.ekf_origin = None  # (lat_deg, lon_deg, alt_m), set at the first GPS fix
         self._ekf = EkfModel(seed, ekf_delay_s)
@@ -168,6 +169,7 @@ class AutopilotSim:
         self._tmp = None
         self._plant = None
         self._conn = None
+        self._log = None
         try:
             self._plant = self._build_plant(work_dir)
             self.last_plant_output = self._plant.reset(scenario.initial_state, scenario.current_ne)
@@ -181,6 +183,10 @@ class AutopilotSim:
         self._t0 = clock.now()
         self._steps = 0
         self._outputs = (0.0, 0.0)
+        if log_dir is not None:
+            from .autopilot_log import AutopilotLog
+
+            self._log = AutopilotLog(log_dir)
         self._boot(0.0)
 
     # -- construction ---------------------------------------------------------------------
@@ -193,6 +199,12 @@ class AutopilotSim:
             work_dir = self._tmp.name
         return FmuPlant(self.scenario.plant_params, ActuatorLimits(*self.scenario.actuator_rates),
                         work_dir)
+
+    def _build_servos(self) -> CommandChannels:
+        try:
+            return CommandChannels.from_servo_params(self._params.values)
+        except ValueError as exc:
+            raise InputError(f"autopilot parameters: {exc}") from None
 
     def _build_mapping(self) -> CommandChannels:
         try:
@@ -223,6 +235,8 @@ class AutopilotSim:
         self._oneshot: list[int] = []
         self._reboot_pending = False
         self._outputs = (0.0, 0.0)
+        if self._log is not None:
+            self._log.start(self)
         major, minor, patch = FIRMWARE[self._params.legacy]
         self._statustext(f"ArduRover V{major}.{minor}.{patch} (canalnav simulator)",
                          severity=6)
@@ -257,6 +271,45 @@ class AutopilotSim:
     @property
     def params(self) -> dict:
         return dict(self._params.values)
+
+    @property
+    def param_defaults(self) -> dict:
+        return self._params.defaults
+
+    @property
+    def log_paths(self) -> list:
+        """The DataFlash logs written so far (one per boot), oldest first."""
+        return [] if self._log is None else list(self._log.paths)
+
+    def rc_inputs(self, n: int = 14) -> list[int]:
+        """RC input channels 1..n as the firmware reads them (overrides, else the receiver)."""
+        return self._rc.channels(self._params, self.boot_s, n)
+
+    def servo_outputs(self, n: int = 14) -> list[int]:
+        """Servo outputs 1..n (us) for the firmware's (nT, nS): SERVOn_FUNCTION and
+        SERVOn_* say which output and how; a disabled output is 0."""
+        pwm = self._servos.to_pwm(*self._outputs)
+        return [int(pwm.get(ch, 0)) for ch in range(1, n + 1)]
+
+    @property
+    def actuator_commands(self) -> tuple[float, float]:
+        """(nT, nS) the servos carry out: the firmware's outputs through their PWM."""
+        s = self._servos
+        return s.to_commands(s.to_pwm(*self._outputs))
+
+    @property
+    def estimate(self):
+        """The EKF's estimate now (autopilot_ekf.Estimate, in the scenario's frame)."""
+        return self._estimate()
+
+    def geodetic_position(self, e) -> tuple[float, float]:
+        """An estimate's latitude and longitude (degrees)."""
+        return ned_to_geodetic(e.north_m, e.east_m, self._origin)
+
+    def local_position(self, e) -> tuple[float, float]:
+        """An estimate's north and east from the EKF origin (m), as LOCAL_POSITION_NED."""
+        lat, lon = self.geodetic_position(e)
+        return geodetic_to_ned(lat, lon, self.ekf_origin)
 
     @property
     def initialised(self) -> bool:
@@ -297,6 +350,8 @@ class AutopilotSim:
         self._outputs = self._compute_outputs()
         if self.ekf_origin is None and self.ekf_ready:
             self._set_ekf_origin()
+        if self._log is not None:
+            self._log.update(self)
         self._send_due()
 
     def serve(self, duration_s: float | None = None) -> None:
@@ -312,6 +367,8 @@ class AutopilotSim:
         lat, lon = ned_to_geodetic(e.north_m, e.east_m, self._origin)
         self.ekf_origin = (lat, lon, float(self._origin[2]))
         self._oneshot.append(st.GPS_GLOBAL_ORIGIN)
+        if self._log is not None:
+            self._log.origin(self)
 
     @property
     def ekf_origin_ne(self) -> tuple[float, float] | None:
@@ -322,10 +379,15 @@ class AutopilotSim:
 
     def _finish_init(self) -> None:
         """The end of start-up: Rover's late defaults (dead zones), then MANUAL."""
-        if self._params.finish_init():
+        changed = self._params.finish_init()
+        if changed:
             self._mapping = self._build_mapping()
         self._initialised = True
         self.mode = MANUAL
+        if self._log is not None:
+            for name in changed:
+                self._log.param(self, name, self._params[name])
+            self._log.mode(self, 1)  # ModeReason::INITIALISED
         self._statustext("Ready to drive", severity=6)
 
     def restart(self) -> None:
@@ -346,6 +408,8 @@ class AutopilotSim:
         if self._plant is not None:
             self._plant.close()
             self._plant = None
+        if self._log is not None:
+            self._log.close()
         if self._tmp is not None:
             self._tmp.cleanup()
             self._tmp = None
@@ -360,7 +424,7 @@ class AutopilotSim:
     def _advance(self, t_target: float) -> None:
         n = math.floor(t_target / self.physics_step_s + 1e-6)
         while self._steps < n:
-            self.last_plant_output = self._plant.step(self._outputs, self.physics_step_s)
+            self.last_plant_output = self._plant.step(self.actuator_commands, self.physics_step_s)
             self._ekf.step(self.physics_step_s)
             self._steps += 1
 
@@ -526,6 +590,13 @@ class AutopilotSim:
             self._send_param(name)
 
     def _param_changed(self, name: str) -> None:
+        if self._log is not None:
+            self._log.param(self, name, self._params[name])
+        if name.startswith("SERVO"):
+            try:
+                self._servos = CommandChannels.from_servo_params(self._params.values)
+            except ValueError as exc:
+                self._statustext(f"SERVO: {exc}"[:50], severity=4)
         if name.startswith(("RC", "RCMAP_")) and name not in ("RC_OPTIONS", "RC_OVERRIDE_TIME"):
             try:
                 self._mapping = CommandChannels.from_rc_params(self._params.values)
@@ -580,10 +651,14 @@ class AutopilotSim:
                 return mav.MAV_RESULT_FAILED
             self.armed = True
             self._statustext("Throttle armed", severity=6)
+            if self._log is not None:
+                self._log.arm(self, force)
         elif p[0] == 0:
             if self.armed:
                 self.armed = False
                 self._statustext("Throttle disarmed", severity=6)
+                if self._log is not None:
+                    self._log.arm(self, force)
         else:
             return mav.MAV_RESULT_UNSUPPORTED
         self._outputs = self._compute_outputs()
@@ -613,6 +688,8 @@ class AutopilotSim:
         if custom_mode != self.mode:
             self.mode = custom_mode
             self._statustext(f"Mode {name}", severity=6)
+            if self._log is not None:
+                self._log.mode(self)
             self._outputs = self._compute_outputs()
         return mav.MAV_RESULT_ACCEPTED
 
@@ -660,6 +737,8 @@ class AutopilotSim:
     def _statustext(self, text: str, severity: int = 6) -> None:
         if self._conn is not None:
             self._conn.mav.statustext_send(severity, text.encode("utf-8")[:50])
+        if self._log is not None:
+            self._log.text(self, text)
 
     def _send_due(self) -> None:
         for _ in range(min(PARAMS_PER_PUMP, len(self._param_queue))):
@@ -756,13 +835,10 @@ class AutopilotSim:
         self._conn.mav.rc_channels_send(self._time_boot_ms, 16, *chans, 255)
 
     def _send_servo_output(self) -> None:
-        """Port 1 steering (SERVO1, above 1500 is starboard), port 3 throttle; 1100-1900 us."""
-        nT, nS = self._outputs
-        servos = [0] * 16
-        servos[0] = int(round(1500 - 4.0 * nS))
-        servos[2] = int(round(1500 + 4.0 * nT))
+        """Servo outputs 1-16 (SERVOn_FUNCTION/MIN/MAX/TRIM/REVERSED: by default output 1
+        steers, above trim to starboard, and output 3 throttles; 1100-1900 us)."""
         self._conn.mav.servo_output_raw_send((self._time_boot_ms * 1000) & 0xFFFFFFFF, 0,
-                                             *servos)
+                                             *self.servo_outputs(16))
 
     def _send_autopilot_version(self) -> None:
         mav = _mavlink2()

@@ -504,3 +504,54 @@ def test_cli_bad_input_is_one_line(tmp_path, capsys):
     assert main(args + [str(STRAIGHT), "--signing-key", str(tmp_path / "k")]) == 2
     err = capsys.readouterr().err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 3
+
+
+# -- the onboard DataFlash log ----------------------------------------------------------------
+def _read_bin(path):
+    from pymavlink import DFReader
+
+    log = DFReader.DFReader_binary(str(path))
+    out = {}
+    while (m := log.recv_msg()) is not None:
+        out.setdefault(m.get_type(), []).append(m)
+    log.close()
+    return out
+
+
+def test_dataflash_log_as_ardupilot_writes_it(make_rig, tmp_path):
+    from controller.pwm import CommandChannels
+
+    rig = make_rig(init_s=1.0, ekf_delay_s=2.0, log_dir=tmp_path / "logs")
+    rig.run(2.5)
+    rig.arm()
+    for _ in range(10):
+        rig.override(ch3=1700, ch1=1400)  # 45 % ahead, steering below trim: nS > 0, port
+        rig.run(0.3)
+    path = rig.sim.log_paths[0]
+    assert path.name == "00000001.BIN" and path.read_bytes()[:3] == b"\xa3\x95\x80"  # FMT first
+    got = _read_bin(path)  # while it is being written: flushed as it goes
+    assert {"FMT", "UNIT", "MULT", "FMTU", "PARM", "MODE", "ARM", "MSG", "ORGN", "XKF1", "ATT",
+            "POS", "GPS", "IMU", "RCIN", "RCOU"} <= set(got)
+    dz = [(m.TimeUS, m.Value) for m in got["PARM"] if m.Name == "RC1_DZ"]
+    assert dz[0] == (0, 0.0) and dz[1][1] == 30.0 and dz[1][0] >= 1_000_000  # set by start-up
+    assert [m.Mode for m in got["MODE"]][:2] == [16, 0]  # INITIALISING, then MANUAL
+    assert got["ARM"][0].ArmState == 1
+    assert got["ORGN"][0].Type == 0 and got["ORGN"][0].TimeUS >= 2_000_000
+    xkf = got["XKF1"]
+    rate = (len(xkf) - 1) / ((xkf[-1].TimeUS - xkf[0].TimeUS) * 1e-6)
+    assert 24 <= rate <= 26 and xkf[0].TimeUS >= 2_000_000  # from the fix on, 25 Hz
+    assert abs(xkf[0].PN) < 0.1 and xkf[-1].PN > 2.0  # metres from the EKF origin
+    rcou = got["RCOU"]
+    assert 49 <= (len(rcou) - 1) / ((rcou[-1].TimeUS - rcou[0].TimeUS) * 1e-6) <= 51
+    params = {m.Name: m.Value for m in got["PARM"]}
+    servos = CommandChannels.from_servo_params(params)
+    nT, nS = servos.to_commands({1: rcou[-1].C1, 3: rcou[-1].C3})
+    assert (nT, nS) == pytest.approx(rig.sim.outputs, abs=0.13)
+    assert nT == pytest.approx(45.0, abs=0.2) and nS == pytest.approx(100 * 70 / 370, abs=0.3)
+    assert rcou[-1].C2 == 0  # a disabled output
+    assert got["RCIN"][-1].C3 == 1700 and got["RCIN"][-1].C1 == 1400
+    assert got["IMU"][-1].GyrZ < 0  # turning to port
+    rig.sim.restart()  # a reboot starts a new log
+    rig.run(0.2)
+    assert [p.name for p in rig.sim.log_paths] == ["00000001.BIN", "00000002.BIN"]
+    assert (tmp_path / "logs" / "LASTLOG.TXT").read_text().strip() == "2"
