@@ -68,7 +68,7 @@ from controller.errors import InputError
 from . import ardupilot
 from . import autopilot_streams as st
 from .autopilot_ekf import EkfModel
-from .ekf_state import geodetic_to_ned, ned_to_geodetic  # one flat-earth conversion
+from controller.geodetic import geodetic_to_ned, ned_to_geodetic  # both ends agree
 from .autopilot_params import ParamTable, param_id
 from .autopilot_rc import UINT16_MAX, RcInput
 from controller.pwm import CommandChannels
@@ -144,7 +144,7 @@ class AutopilotSim:
                  signing_key: bytes | None = None, params: dict | None = None,
                  ekf_delay_s: float = 20.0, legacy_param_names: bool = False,
                  work_dir=None, physics_step_s: float = 0.01, system_id: int = 1,
-                 init_s: float = 3.0, log_dir=None):
+                 init_s: float = 3.0, log_dir=None, ekf_noise=None):
         if not physics_step_s > 0:
             raise InputError(f"physics step must be positive, got {physics_step_s}")
         if not (math.isfinite(init_s) and init_s >= 0):
@@ -161,7 +161,7 @@ class AutopilotSim:
         self._servos = self._build_servos()
         self._origin = scenario.geodetic_origin or ardupilot.SITL_DEFAULT_HOME
         self.ekf_origin = None  # (lat_deg, lon_deg, alt_m), set at the first GPS fix
-        self._ekf = EkfModel(seed, ekf_delay_s)
+        self._ekf = EkfModel(seed, ekf_delay_s, *(() if ekf_noise is None else (ekf_noise,)))
         self._rc = RcInput()
         self._streams = st.Streams()
         self.counters = LinkCounters()

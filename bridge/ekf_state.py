@@ -15,6 +15,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from controller.geodetic import geodetic_to_ned
 from controller.geometry import wrap_angle
 
 # EKF_STATUS_REPORT.flags (MAVLink EKF_STATUS_FLAGS).
@@ -25,7 +26,6 @@ EKF_POS_HORIZ_ABS = 16
 EKF_CONST_POS_MODE = 128
 EKF_UNINITIALIZED = 1024
 
-EARTH_RADIUS_M = 6378100.0  # ArduPilot's RADIUS_OF_EARTH (its LATLON_TO_M = 0.01113188 m per 1e-7 deg)
 MAX_ATTITUDE_SKEW_S = 0.5  # attitude older than this next to a position is not extrapolated
 
 
@@ -66,23 +66,6 @@ def body_velocity(v_north: float, v_east: float, psi: float) -> tuple[float, flo
     """NED horizontal velocity -> body (u forward, v starboard) for heading psi."""
     c, s = math.cos(psi), math.sin(psi)
     return c * v_north + s * v_east, -s * v_north + c * v_east
-
-
-def geodetic_to_ned(lat_deg: float, lon_deg: float, origin) -> tuple[float, float]:
-    """Latitude/longitude -> (north, east) metres from `origin` = (lat_deg, lon_deg, alt_m)."""
-    lat0, lon0 = float(origin[0]), float(origin[1])
-    dlon = (float(lon_deg) - lon0 + 180.0) % 360.0 - 180.0
-    north = math.radians(float(lat_deg) - lat0) * EARTH_RADIUS_M
-    east = math.radians(dlon) * EARTH_RADIUS_M * math.cos(math.radians(lat0))
-    return north, east
-
-
-def ned_to_geodetic(north: float, east: float, origin) -> tuple[float, float]:
-    """The inverse of `geodetic_to_ned` (for simulated autopilots and tests)."""
-    lat0, lon0 = float(origin[0]), float(origin[1])
-    lat = lat0 + math.degrees(float(north) / EARTH_RADIUS_M)
-    lon = lon0 + math.degrees(float(east) / (EARTH_RADIUS_M * math.cos(math.radians(lat0))))
-    return lat, (lon + 180.0) % 360.0 - 180.0
 
 
 def _heading_at(attitude, time_boot_s: float) -> float:

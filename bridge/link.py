@@ -35,8 +35,9 @@ from controller.errors import CanalnavError, InputError
 from bridge.ardupilot import MODE_NAMES, MODES, OVERRIDE_IGNORE, OVERRIDE_RELEASE
 from bridge.boot_clock import BootClock
 from bridge.signing import rejected_for_signature
-from bridge.ekf_state import (EkfState, geodetic_to_ned, horizontal_position_ok,
-                              state_from_global, state_from_local)
+from bridge.ekf_state import (EkfState, horizontal_position_ok, state_from_global,
+                              state_from_local)
+from controller.geodetic import geodetic_to_ned
 
 os.environ["MAVLINK20"] = "1"  # before the dialect loads: MAVLink 2 (needed for signing)
 from pymavlink import mavutil  # noqa: E402
@@ -172,6 +173,7 @@ class AutopilotLink:
         self.position_source = None  # the message the state's position comes from
         self.frame_mismatch_m = None  # newest LOCAL vs GLOBAL comparison
         self.notices: deque[tuple[float, str]] = deque(maxlen=100)  # for the loop to log
+        self.servo_outputs: deque[tuple[float, tuple[int, ...]]] = deque(maxlen=400)
         self._last_rx_s: float | None = None
         self._last_boot_ms: int | None = None
         self._acks: list[tuple[int, int, float]] = []  # (command, result, received_s)
@@ -381,6 +383,17 @@ class AutopilotLink:
             self._state = state_from_local(att, pos, received)
         else:
             self._state = state_from_local(att, pos, received, self._ekf_offset)
+
+    def _on_servo_output_raw(self, msg, now: float) -> None:
+        """The autopilot's servo outputs 1-16 (us) at its time (s since boot)."""
+        if int(getattr(msg, "port", 0)) != 0:
+            return
+        pwm = tuple(int(getattr(msg, f"servo{i}_raw", 0) or 0) for i in range(1, 17))
+        t = msg.time_usec * 1e-6  # uint32 microseconds: wraps every 71.6 minutes
+        if self._last_boot_ms is not None:
+            wrap = 2 ** 32 * 1e-6
+            t += round((self._last_boot_ms * 1e-3 - t) / wrap) * wrap
+        self.servo_outputs.append((t, pwm))
 
     def _on_ekf_status_report(self, msg, now: float) -> None:
         self.ekf_flags = int(msg.flags)

@@ -17,7 +17,7 @@ import pytest
 import bridge.link  # noqa: F401 - sets MAVLink 2 before any connection is made
 from bridge.ardupilot import DEFAULT_PARAMS, MODE_NAMES, MODES
 from bridge.clock import VirtualClock
-from bridge.ekf_state import ned_to_geodetic
+from controller.geodetic import ned_to_geodetic
 from bridge.mavlink_plant import free_udp_port
 from pymavlink import mavutil
 

@@ -370,7 +370,7 @@ def test_cli_bad_input_is_one_clear_line(capsys, tmp_path):
 
 def test_frames_that_disagree_are_refused_and_a_missing_origin_is_a_note(make_autopilot, vclock,
                                                                         scenario):
-    from bridge.ekf_state import ned_to_geodetic
+    from controller.geodetic import ned_to_geodetic
 
     ap = make_autopilot()
     lat, lon = ned_to_geodetic(10.0, 0.0, ap.origin)
