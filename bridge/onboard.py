@@ -232,6 +232,40 @@ def prepare_link(link, scenario, options: BridgeOptions = BridgeOptions(), conso
     return Preparation(link.heartbeat, params, streams, notes)
 
 
+def link_fault(link) -> str | None:
+    """Why nothing may be steered now (short: it goes to the ground station), or None: the
+    link lost, the state stale, the EKF's position unusable."""
+    if not link.alive:
+        return f"link lost ({link.silence_s:.1f} s silent)"
+    if not link.state_fresh:
+        return f"state stale ({link.state_age_s:.1f} s old)"
+    if not link.horizontal_position_ok:
+        flags = link.ekf_flags
+        return f"EKF position unusable (flags {'none' if flags is None else hex(flags)})"
+    return None
+
+
+def safe_stop(link, options: BridgeOptions, reason: str, severity: int) -> str:
+    """Neutral (`safe_repeats` times, 50 ms apart), overrides released, HOLD if the mode is
+    ours, then the reason to the ground station; what happened to the mode (for the console)."""
+    if link.rc_mapping is not None:
+        for _ in range(options.safe_repeats):
+            link.send_neutral()
+            link.idle(0.05)
+        for _ in range(options.safe_repeats):
+            link.release()
+            link.idle(0.05)
+    held = ""
+    if options.mode:
+        try:
+            link.set_mode("HOLD", timeout_s=0.5, retries=2)
+            held = ", HOLD"
+        except CanalnavError as exc:
+            held = f", HOLD failed ({exc})"
+    link.statustext(f"canalnav: {reason}", severity)
+    return held
+
+
 def nearest_segment_m(position, segments) -> float:
     """Distance from a point to the nearest segment (x_c, y_c, theta, length); inf if none."""
     from controller.geometry import point_segment_distance, segments_to_endpoints
@@ -343,15 +377,7 @@ class OnboardLoop:
 
     def _fault(self) -> str | None:
         """Why the loop must not steer now (short: it goes to the ground station), or None."""
-        link = self.link
-        if not link.alive:
-            return f"link lost ({link.silence_s:.1f} s silent)"
-        if not link.state_fresh:
-            return f"state stale ({link.state_age_s:.1f} s old)"
-        if not link.horizontal_position_ok:
-            flags = link.ekf_flags
-            return f"EKF position unusable (flags {'none' if flags is None else hex(flags)})"
-        return None
+        return link_fault(self.link)
 
     def _step(self, t: float) -> str | None:
         """One control period; returns a fault that calls for the failsafe, else None."""
@@ -385,27 +411,10 @@ class OnboardLoop:
         return None
 
     # -- stopping ------------------------------------------------------------------------------
-    def _pause(self, seconds: float) -> None:
-        self.link.idle(seconds)
-
     def _stop(self, reason: str, severity: int) -> None:
         """Neutral, release, HOLD (if the mode is ours), then tell the ground station."""
         link = self.link
-        if link.rc_mapping is not None:
-            for _ in range(self.options.safe_repeats):
-                link.send_neutral()
-                self._pause(0.05)
-            for _ in range(self.options.safe_repeats):
-                link.release()
-                self._pause(0.05)
-        held = ""
-        if self.options.mode:
-            try:
-                link.set_mode("HOLD", timeout_s=0.5, retries=2)
-                held = ", HOLD"
-            except CanalnavError as exc:
-                held = f", HOLD failed ({exc})"
-        link.statustext(f"canalnav: {reason}", severity)
+        held = safe_stop(link, self.options, reason, severity)
         self._actuators = np.zeros(2)
         t = self.clock.now() - self._t0
         hb = link.heartbeat
