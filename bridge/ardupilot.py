@@ -40,10 +40,27 @@ DEFAULT_PARAMS = {
     **{f"RC{n}_{k}": v for n in range(1, 17)
        for k, v in (("MIN", 1100.0), ("MAX", 1900.0), ("TRIM", 1500.0), ("DZ", 0.0),
                     ("REVERSED", 0.0))},
-    # Rover gives steering and throttle a dead zone of 30 us by default.
+    # A running Rover: the steering and throttle channels have a dead zone of 30 us.
     "RC1_DZ": 30.0,
     "RC3_DZ": 30.0,
+    # Servo outputs (SRV_Channel): 1100-1900 us, trim 1500; output 1 steers (GroundSteering,
+    # 26) and output 3 throttles (Throttle, 70), Rover's defaults; the others are disabled.
+    **{f"SERVO{n}_{k}": v for n in range(1, 17)
+       for k, v in (("FUNCTION", 0.0), ("MIN", 1100.0), ("MAX", 1900.0), ("TRIM", 1500.0),
+                    ("REVERSED", 0.0))},
+    "SERVO1_FUNCTION": 26.0,
+    "SERVO3_FUNCTION": 70.0,
 }
+
+ROVER_INIT_DEAD_ZONE_US = 30.0
+"""`Rover::init_rc_in()` gives the steering and throttle channels (RCMAP_ROLL, RCMAP_THROTTLE)
+a dead-zone default of 30 us late in start-up (after the barometer calibration); until then,
+and on every other channel, an RCn_DZ not stored reads 0 (RC_Channel's own default). MAVLink
+answers during start-up, so a parameter read then is not the one that applies."""
+
+# HEARTBEAT.system_status values (MAV_STATE) that mean the autopilot is not yet running;
+# Rover reports MAV_STATE_CALIBRATING, in mode INITIALISING, until its start-up is over.
+MAV_STATE_STARTING = {0: "UNINIT", 1: "BOOT", 2: "CALIBRATING"}
 
 # RC_CHANNELS_OVERRIDE, channels 9..18: 0 and UINT16_MAX leave a channel as it is, this value
 # hands it back to the receiver (MAVLink spec; channels 1..8 use OVERRIDE_RELEASE = 0).

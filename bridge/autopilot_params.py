@@ -29,18 +29,51 @@ def default_params(system_id: int, legacy: bool) -> dict[str, float]:
 
 
 class ParamTable:
-    """Name -> float with stable indices; unknown names are refused, never added."""
+    """Name -> float with stable indices; unknown names are refused, never added.
+
+    `stored` holds the names given a value (at construction or by PARAM_SET), as if saved to
+    the autopilot's storage: start-up defaults (`boot`, `finish_init`) never change those.
+    """
 
     def __init__(self, system_id: int = 1, legacy: bool = False, overrides: dict | None = None):
         self.legacy = legacy
         self.values = default_params(system_id, legacy)
+        self.defaults = dict(self.values)  # as PARM logs them beside the value
+        self.stored: set[str] = set()
         for name, value in (overrides or {}).items():
             if name not in self.values:
                 raise InputError(self._unknown(name))
             v = _number(name, value)
             self.values[name] = v
+            self.stored.add(name)
         self.names = sorted(self.values)
         self._index = {n: i for i, n in enumerate(self.names)}
+        self.boot()
+
+    def _dead_zones(self) -> list[str]:
+        """RCn_DZ of the steering and throttle channels (RCMAP_ROLL, RCMAP_THROTTLE)."""
+        out = []
+        for key in ("RCMAP_ROLL", "RCMAP_THROTTLE"):
+            name = f"RC{int(self.values.get(key, 0))}_DZ"
+            if name in self.values:
+                out.append(name)
+        return out
+
+    def boot(self) -> None:
+        """Values as start-up reads them: the dead zones not stored are RC_Channel's 0."""
+        for name in self._dead_zones():
+            if name not in self.stored:
+                self.values[name] = 0.0
+
+    def finish_init(self) -> list[str]:
+        """Rover's late start-up defaults (`Rover::init_rc_in`): the steering and throttle
+        dead zones not stored become 30 us. Returns the names that changed."""
+        changed = []
+        for name in self._dead_zones():
+            if name not in self.stored and self.values[name] != ardupilot.ROVER_INIT_DEAD_ZONE_US:
+                self.values[name] = ardupilot.ROVER_INIT_DEAD_ZONE_US
+                changed.append(name)
+        return changed
 
     def _unknown(self, name: str) -> str:
         other = {o: n for o, n in ardupilot.PARAM_ALIASES.values()}
@@ -71,6 +104,7 @@ class ParamTable:
         if name not in self.values or not math.isfinite(value):
             return False
         self.values[name] = float(value)
+        self.stored.add(name)
         return True
 
     # -- what the simulated firmware reads ----------------------------------------------

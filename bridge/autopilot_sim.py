@@ -1,8 +1,15 @@
 """A simulated ArduPilot Rover (boat frame) speaking MAVLink 2, with the boat FMU as its physics.
 
 What is simulated, as ArduPilot Rover does it:
+- Start-up: for `init_s` seconds after (re)boot the mode is INITIALISING and the heartbeat's
+  system_status MAV_STATE_CALIBRATING; MAVLink answers meanwhile, but arming and mode changes
+  are refused, and the steering and throttle dead zones read 0 until start-up ends and sets
+  them to 30 us (unless stored: `Rover::init_rc_in`). Then MANUAL, disarmed.
 - HEARTBEAT (MAV_TYPE_SURFACE_BOAT, MAV_AUTOPILOT_ARDUPILOTMEGA, custom_mode = Rover mode
-  number, SAFETY_ARMED when armed, STANDBY/ACTIVE); boots disarmed in MANUAL.
+  number, SAFETY_ARMED when armed; system_status STANDBY in HOLD, ACTIVE otherwise, as
+  `GCS_MAVLINK_Rover::vehicle_system_status`).
+- A parameter that changes (PARAM_SET from any ground station, `set_param`) is sent to all as
+  PARAM_VALUE; start-up's own defaults are not (ArduPilot's `set_default` does not notify).
 - Parameters (PARAM_REQUEST_READ by name or index, PARAM_REQUEST_LIST, PARAM_SET; REAL32;
   unknown names ignored silently), names of 4.7 or, with `legacy_param_names`, of 4.5.
 - Commands, each ACKed: COMPONENT_ARM_DISARM (21196 forces), DO_SET_MODE, SET/GET_MESSAGE_
@@ -15,10 +22,13 @@ What is simulated, as ArduPilot Rover does it:
 - Streams (defaults in `autopilot_streams.DEFAULT_INTERVALS`): HEARTBEAT, SYS_STATUS and
   EKF_STATUS_REPORT at 1 Hz; ATTITUDE, LOCAL_POSITION_NED, GLOBAL_POSITION_INT at 4 Hz;
   RC_CHANNELS and SERVO_OUTPUT_RAW off. A reboot forgets requested rates.
-- The EKF (`autopilot_ekf`): attitude only until `ekf_delay_s` after boot, then position
-  and velocity; LOCAL_POSITION_NED and GLOBAL_POSITION_INT are sent only once the position
-  is valid. The local NED origin is the scenario's origin (`geodetic_origin`, else ArduPilot
-  SITL's default home).
+- The EKF (`autopilot_ekf`): attitude only until `ekf_delay_s` after boot (the first GPS
+  fix; never before start-up is over), then position and velocity; LOCAL_POSITION_NED and
+  GLOBAL_POSITION_INT are sent only once the position is valid. The scenario's (0, 0) is on
+  the Earth at its `[origin]` (else at ArduPilot SITL's default home, as SITL puts it);
+  GLOBAL_POSITION_INT is there. The EKF origin is set at the first fix wherever the boat is
+  then (moving or not), and LOCAL_POSITION_NED is measured from it; GPS_GLOBAL_ORIGIN says
+  where it is (sent when set, on request, or as a stream). A reboot forgets it.
 - TIMESYNC requests are answered; the legacy REQUEST_DATA_STREAM sets a group's rate
   (EXTENDED_STATUS: SYS_STATUS; RC_CHANNELS: RC_CHANNELS, SERVO_OUTPUT_RAW; POSITION:
   GLOBAL_POSITION_INT, LOCAL_POSITION_NED; EXTRA1: ATTITUDE; EXTRA3: EKF_STATUS_REPORT).
@@ -58,10 +68,10 @@ from controller.errors import InputError
 from . import ardupilot
 from . import autopilot_streams as st
 from .autopilot_ekf import EkfModel
-from .ekf_state import ned_to_geodetic  # one flat-earth conversion, both ends of the link
+from controller.geodetic import geodetic_to_ned, ned_to_geodetic  # both ends agree
 from .autopilot_params import ParamTable, param_id
 from .autopilot_rc import UINT16_MAX, RcInput
-from .rc_mapping import RcMapping
+from controller.pwm import CommandChannels
 from .signing import rejected_for_signature
 
 COMPONENT_ID = 1  # MAV_COMP_ID_AUTOPILOT1
@@ -72,6 +82,7 @@ FIRMWARE = {False: (4, 7, 0), True: (4, 5, 7)}  # version announced, by legacy_p
 
 MANUAL = ardupilot.MODES["MANUAL"]
 HOLD = ardupilot.MODES["HOLD"]
+INITIALISING = ardupilot.MODES["INITIALISING"]
 NEEDS_ESTIMATE = {ardupilot.MODES[m] for m in (
     "ACRO", "STEERING", "LOITER", "FOLLOW", "DOCK", "CIRCLE", "AUTO", "RTL", "SMART_RTL", "GUIDED")}
 MANUAL_INPUT_MODES = {ardupilot.MODES[m] for m in ("MANUAL", "ACRO", "STEERING")}
@@ -132,9 +143,13 @@ class AutopilotSim:
     def __init__(self, scenario, url: str, clock, *, seed: int = 0,
                  signing_key: bytes | None = None, params: dict | None = None,
                  ekf_delay_s: float = 20.0, legacy_param_names: bool = False,
-                 work_dir=None, physics_step_s: float = 0.01, system_id: int = 1):
+                 work_dir=None, physics_step_s: float = 0.01, system_id: int = 1,
+                 init_s: float = 3.0, log_dir=None, ekf_noise=None):
         if not physics_step_s > 0:
             raise InputError(f"physics step must be positive, got {physics_step_s}")
+        if not (math.isfinite(init_s) and init_s >= 0):
+            raise InputError(f"start-up time must be 0 or more seconds, got {init_s}")
+        self.init_s = float(init_s)
         if not 1 <= int(system_id) <= 255:
             raise InputError(f"system id must be 1..255, got {system_id}")
         self.scenario = scenario
@@ -143,8 +158,10 @@ class AutopilotSim:
         self._sysid = int(system_id)
         self._params = ParamTable(self._sysid, legacy_param_names, params)
         self._mapping = self._build_mapping()
+        self._servos = self._build_servos()
         self._origin = scenario.geodetic_origin or ardupilot.SITL_DEFAULT_HOME
-        self._ekf = EkfModel(seed, ekf_delay_s)
+        self.ekf_origin = None  # (lat_deg, lon_deg, alt_m), set at the first GPS fix
+        self._ekf = EkfModel(seed, ekf_delay_s, *(() if ekf_noise is None else (ekf_noise,)))
         self._rc = RcInput()
         self._streams = st.Streams()
         self.counters = LinkCounters()
@@ -152,6 +169,7 @@ class AutopilotSim:
         self._tmp = None
         self._plant = None
         self._conn = None
+        self._log = None
         try:
             self._plant = self._build_plant(work_dir)
             self.last_plant_output = self._plant.reset(scenario.initial_state, scenario.current_ne)
@@ -165,6 +183,10 @@ class AutopilotSim:
         self._t0 = clock.now()
         self._steps = 0
         self._outputs = (0.0, 0.0)
+        if log_dir is not None:
+            from .autopilot_log import AutopilotLog
+
+            self._log = AutopilotLog(log_dir)
         self._boot(0.0)
 
     # -- construction ---------------------------------------------------------------------
@@ -178,9 +200,15 @@ class AutopilotSim:
         return FmuPlant(self.scenario.plant_params, ActuatorLimits(*self.scenario.actuator_rates),
                         work_dir)
 
-    def _build_mapping(self) -> RcMapping:
+    def _build_servos(self) -> CommandChannels:
         try:
-            return RcMapping.from_params(self._params.values)
+            return CommandChannels.from_servo_params(self._params.values)
+        except ValueError as exc:
+            raise InputError(f"autopilot parameters: {exc}") from None
+
+    def _build_mapping(self) -> CommandChannels:
+        try:
+            return CommandChannels.from_rc_params(self._params.values)
         except ValueError as exc:
             raise InputError(f"autopilot parameters: {exc}") from None
 
@@ -192,16 +220,23 @@ class AutopilotSim:
                                  allow_unsigned_callback=lambda mav, msg_id: msg_id in UNSIGNED_ALLOWED)
 
     def _boot(self, boot_t: float) -> None:
-        """Power-on state: disarmed, MANUAL, no overrides, default streams, EKF not ready."""
+        """Power-on state: starting up (INITIALISING), disarmed, no overrides, default
+        streams, EKF not ready, start-up's parameter values."""
         self._boot_t = boot_t
         self.armed = False
-        self.mode = MANUAL
+        self.mode = INITIALISING
+        self._initialised = False
+        self.ekf_origin = None
+        self._params.boot()
+        self._mapping = self._build_mapping()
         self._rc.clear()
         self._streams.reset(0.0)
         self._param_queue: deque[int] = deque()
         self._oneshot: list[int] = []
         self._reboot_pending = False
         self._outputs = (0.0, 0.0)
+        if self._log is not None:
+            self._log.start(self)
         major, minor, patch = FIRMWARE[self._params.legacy]
         self._statustext(f"ArduRover V{major}.{minor}.{patch} (canalnav simulator)",
                          severity=6)
@@ -228,13 +263,62 @@ class AutopilotSim:
         """Seconds since the last (re)boot: time_boot_ms / 1000."""
         return self.time_s - self._boot_t
 
+    def boot_to_clock(self, time_boot_s: float) -> float:
+        """The clock time at which this autopilot's time since boot was `time_boot_s` (what
+        a message stamped with it describes): for tests of the bridge's time keeping."""
+        return self._t0 + self._boot_t + float(time_boot_s)
+
     @property
     def params(self) -> dict:
         return dict(self._params.values)
 
     @property
+    def param_defaults(self) -> dict:
+        return self._params.defaults
+
+    @property
+    def log_paths(self) -> list:
+        """The DataFlash logs written so far (one per boot), oldest first."""
+        return [] if self._log is None else list(self._log.paths)
+
+    def rc_inputs(self, n: int = 14) -> list[int]:
+        """RC input channels 1..n as the firmware reads them (overrides, else the receiver)."""
+        return self._rc.channels(self._params, self.boot_s, n)
+
+    def servo_outputs(self, n: int = 14) -> list[int]:
+        """Servo outputs 1..n (us) for the firmware's (nT, nS): SERVOn_FUNCTION and
+        SERVOn_* say which output and how; a disabled output is 0."""
+        pwm = self._servos.to_pwm(*self._outputs)
+        return [int(pwm.get(ch, 0)) for ch in range(1, n + 1)]
+
+    @property
+    def actuator_commands(self) -> tuple[float, float]:
+        """(nT, nS) the servos carry out: the firmware's outputs through their PWM."""
+        s = self._servos
+        return s.to_commands(s.to_pwm(*self._outputs))
+
+    @property
+    def estimate(self):
+        """The EKF's estimate now (autopilot_ekf.Estimate, in the scenario's frame)."""
+        return self._estimate()
+
+    def geodetic_position(self, e) -> tuple[float, float]:
+        """An estimate's latitude and longitude (degrees)."""
+        return ned_to_geodetic(e.north_m, e.east_m, self._origin)
+
+    def local_position(self, e) -> tuple[float, float]:
+        """An estimate's north and east from the EKF origin (m), as LOCAL_POSITION_NED."""
+        lat, lon = self.geodetic_position(e)
+        return geodetic_to_ned(lat, lon, self.ekf_origin)
+
+    @property
+    def initialised(self) -> bool:
+        """Start-up is over (the mode is no longer INITIALISING)."""
+        return self._initialised
+
+    @property
     def ekf_ready(self) -> bool:
-        return self._ekf.ready(self.boot_s)
+        return self._initialised and self._ekf.ready(self.boot_s)
 
     @property
     def system_id(self) -> int:
@@ -245,6 +329,8 @@ class AutopilotSim:
         ok = self._params.set(name, float(value))
         if ok:
             self._param_changed(name)
+            if self._conn is not None:
+                self._send_param(name)
         return ok
 
     # -- the loop -------------------------------------------------------------------------
@@ -254,12 +340,18 @@ class AutopilotSim:
         `now` is clock time; the physics' time 0 is the clock's time at construction."""
         if self._conn is None:
             return
+        if not self._initialised and self.boot_s >= self.init_s - 1e-9:
+            self._finish_init()
         self._receive_all()
         if self._reboot_pending:
             self.restart()
         self._outputs = self._compute_outputs()
         self._advance(now - self._t0)
         self._outputs = self._compute_outputs()
+        if self.ekf_origin is None and self.ekf_ready:
+            self._set_ekf_origin()
+        if self._log is not None:
+            self._log.update(self)
         self._send_due()
 
     def serve(self, duration_s: float | None = None) -> None:
@@ -268,6 +360,35 @@ class AutopilotSim:
         while duration_s is None or self.clock.now() - start < duration_s:
             self.pump(self.clock.now())
             self.clock.sleep(0.002)
+
+    def _set_ekf_origin(self) -> None:
+        """The first fix: the EKF origin is the estimated position now, moving or not."""
+        e = self._estimate()
+        lat, lon = ned_to_geodetic(e.north_m, e.east_m, self._origin)
+        self.ekf_origin = (lat, lon, float(self._origin[2]))
+        self._oneshot.append(st.GPS_GLOBAL_ORIGIN)
+        if self._log is not None:
+            self._log.origin(self)
+
+    @property
+    def ekf_origin_ne(self) -> tuple[float, float] | None:
+        """The EKF origin in the scenario's frame (north, east metres), None before a fix."""
+        if self.ekf_origin is None:
+            return None
+        return geodetic_to_ned(self.ekf_origin[0], self.ekf_origin[1], self._origin)
+
+    def _finish_init(self) -> None:
+        """The end of start-up: Rover's late defaults (dead zones), then MANUAL."""
+        changed = self._params.finish_init()
+        if changed:
+            self._mapping = self._build_mapping()
+        self._initialised = True
+        self.mode = MANUAL
+        if self._log is not None:
+            for name in changed:
+                self._log.param(self, name, self._params[name])
+            self._log.mode(self, 1)  # ModeReason::INITIALISED
+        self._statustext("Ready to drive", severity=6)
 
     def restart(self) -> None:
         """A reboot: boot time from 0, disarmed, MANUAL, EKF not ready; the boat keeps moving."""
@@ -287,6 +408,8 @@ class AutopilotSim:
         if self._plant is not None:
             self._plant.close()
             self._plant = None
+        if self._log is not None:
+            self._log.close()
         if self._tmp is not None:
             self._tmp.cleanup()
             self._tmp = None
@@ -301,7 +424,7 @@ class AutopilotSim:
     def _advance(self, t_target: float) -> None:
         n = math.floor(t_target / self.physics_step_s + 1e-6)
         while self._steps < n:
-            self.last_plant_output = self._plant.step(self._outputs, self.physics_step_s)
+            self.last_plant_output = self._plant.step(self.actuator_commands, self.physics_step_s)
             self._ekf.step(self.physics_step_s)
             self._steps += 1
 
@@ -467,9 +590,16 @@ class AutopilotSim:
             self._send_param(name)
 
     def _param_changed(self, name: str) -> None:
+        if self._log is not None:
+            self._log.param(self, name, self._params[name])
+        if name.startswith("SERVO"):
+            try:
+                self._servos = CommandChannels.from_servo_params(self._params.values)
+            except ValueError as exc:
+                self._statustext(f"SERVO: {exc}"[:50], severity=4)
         if name.startswith(("RC", "RCMAP_")) and name not in ("RC_OPTIONS", "RC_OVERRIDE_TIME"):
             try:
-                self._mapping = RcMapping.from_params(self._params.values)
+                self._mapping = CommandChannels.from_rc_params(self._params.values)
             except ValueError as exc:
                 self._statustext(f"RC: {exc}; previous kept"[:50], severity=4)
 
@@ -512,16 +642,23 @@ class AutopilotSim:
         mav = _mavlink2()
         force = _int(p[1]) == ardupilot.FORCE_ARM_MAGIC
         if p[0] == 1:
+            if not self._initialised:
+                self._statustext("Arm: System not initialised", severity=2)
+                return mav.MAV_RESULT_TEMPORARILY_REJECTED
             if self.armed:
                 return mav.MAV_RESULT_ACCEPTED
             if not force and not self._prearm_ok():
                 return mav.MAV_RESULT_FAILED
             self.armed = True
             self._statustext("Throttle armed", severity=6)
+            if self._log is not None:
+                self._log.arm(self, force)
         elif p[0] == 0:
             if self.armed:
                 self.armed = False
                 self._statustext("Throttle disarmed", severity=6)
+                if self._log is not None:
+                    self._log.arm(self, force)
         else:
             return mav.MAV_RESULT_UNSUPPORTED
         self._outputs = self._compute_outputs()
@@ -538,6 +675,9 @@ class AutopilotSim:
         mav = _mavlink2()
         if not base_mode & mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
             return mav.MAV_RESULT_DENIED
+        if not self._initialised:
+            self._statustext("Mode change failed: still initialising", severity=4)
+            return mav.MAV_RESULT_TEMPORARILY_REJECTED
         name = ardupilot.MODE_NAMES.get(custom_mode)
         if name is None or name == "INITIALISING":
             self._statustext(f"Unknown mode {custom_mode}", severity=4)
@@ -548,6 +688,8 @@ class AutopilotSim:
         if custom_mode != self.mode:
             self.mode = custom_mode
             self._statustext(f"Mode {name}", severity=6)
+            if self._log is not None:
+                self._log.mode(self)
             self._outputs = self._compute_outputs()
         return mav.MAV_RESULT_ACCEPTED
 
@@ -595,6 +737,8 @@ class AutopilotSim:
     def _statustext(self, text: str, severity: int = 6) -> None:
         if self._conn is not None:
             self._conn.mav.statustext_send(severity, text.encode("utf-8")[:50])
+        if self._log is not None:
+            self._log.text(self, text)
 
     def _send_due(self) -> None:
         for _ in range(min(PARAMS_PER_PUMP, len(self._param_queue))):
@@ -619,11 +763,16 @@ class AutopilotSim:
         base = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
         if self.mode in MANUAL_INPUT_MODES:
             base |= mav.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
-        elif self.mode != HOLD:
+        elif self.mode not in (HOLD, INITIALISING):
             base |= mav.MAV_MODE_FLAG_GUIDED_ENABLED
         if self.armed:
             base |= mav.MAV_MODE_FLAG_SAFETY_ARMED
-        status = mav.MAV_STATE_ACTIVE if self.armed else mav.MAV_STATE_STANDBY
+        if not self._initialised:
+            status = mav.MAV_STATE_CALIBRATING
+        elif self.mode == HOLD:
+            status = mav.MAV_STATE_STANDBY
+        else:
+            status = mav.MAV_STATE_ACTIVE
         self._conn.mav.heartbeat_send(mav.MAV_TYPE_SURFACE_BOAT, mav.MAV_AUTOPILOT_ARDUPILOTMEGA,
                                       base, self.mode, status)
 
@@ -645,11 +794,21 @@ class AutopilotSim:
         self._conn.mav.attitude_send(self._time_boot_ms, 0.0, 0.0, e.psi_rad, 0.0, 0.0, e.r_radps)
 
     def _send_local_position(self) -> None:
-        if not self.ekf_ready:
+        if not self.ekf_ready or self.ekf_origin is None:
             return  # ArduPilot sends it only with a valid position
         e = self._estimate()
-        self._conn.mav.local_position_ned_send(self._time_boot_ms, e.north_m, e.east_m, 0.0,
+        lat, lon = ned_to_geodetic(e.north_m, e.east_m, self._origin)
+        north, east = geodetic_to_ned(lat, lon, self.ekf_origin)  # from the EKF origin
+        self._conn.mav.local_position_ned_send(self._time_boot_ms, north, east, 0.0,
                                                e.vn_mps, e.ve_mps, 0.0)
+
+    def _send_gps_global_origin(self) -> None:
+        if self.ekf_origin is None:
+            return  # as ArduPilot: nothing to say before the origin is set
+        lat, lon, alt = self.ekf_origin
+        self._conn.mav.gps_global_origin_send(int(round(lat * 1e7)), int(round(lon * 1e7)),
+                                              int(round(alt * 1000.0)),
+                                              int(self.boot_s * 1e6))
 
     def _send_global_position(self) -> None:
         if not self.ekf_ready:
@@ -676,13 +835,10 @@ class AutopilotSim:
         self._conn.mav.rc_channels_send(self._time_boot_ms, 16, *chans, 255)
 
     def _send_servo_output(self) -> None:
-        """Port 1 steering (SERVO1, above 1500 is starboard), port 3 throttle; 1100-1900 us."""
-        nT, nS = self._outputs
-        servos = [0] * 16
-        servos[0] = int(round(1500 - 4.0 * nS))
-        servos[2] = int(round(1500 + 4.0 * nT))
+        """Servo outputs 1-16 (SERVOn_FUNCTION/MIN/MAX/TRIM/REVERSED: by default output 1
+        steers, above trim to starboard, and output 3 throttles; 1100-1900 us)."""
         self._conn.mav.servo_output_raw_send((self._time_boot_ms * 1000) & 0xFFFFFFFF, 0,
-                                             *servos)
+                                             *self.servo_outputs(16))
 
     def _send_autopilot_version(self) -> None:
         mav = _mavlink2()
@@ -714,5 +870,6 @@ class AutopilotSim:
         st.EKF_STATUS_REPORT: _send_ekf_status,
         st.RC_CHANNELS: _send_rc_channels,
         st.SERVO_OUTPUT_RAW: _send_servo_output,
+        st.GPS_GLOBAL_ORIGIN: _send_gps_global_origin,
         148: _send_autopilot_version,  # AUTOPILOT_VERSION, on request only
     }

@@ -13,6 +13,7 @@ SYS_STATUS = 1
 ATTITUDE = 30
 LOCAL_POSITION_NED = 32
 GLOBAL_POSITION_INT = 33
+GPS_GLOBAL_ORIGIN = 49
 SERVO_OUTPUT_RAW = 36
 RC_CHANNELS = 65
 EKF_STATUS_REPORT = 193
@@ -27,6 +28,7 @@ DEFAULT_INTERVALS: dict[int, float | None] = {
     GLOBAL_POSITION_INT: 0.25,
     RC_CHANNELS: None,
     SERVO_OUTPUT_RAW: None,
+    GPS_GLOBAL_ORIGIN: None,  # on request (and once when the EKF sets its origin)
 }
 
 # MAV_DATA_STREAM groups of the legacy REQUEST_DATA_STREAM, as ArduPilot fills them.

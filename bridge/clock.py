@@ -9,6 +9,7 @@ exchange runs deterministically in one thread over real loopback sockets.
 
 from __future__ import annotations
 
+import select
 import time
 from typing import Callable
 
@@ -29,6 +30,15 @@ class RealClock:
         if seconds > 0:
             time.sleep(seconds / self.speedup)
 
+    def wait_readable(self, fd: int, seconds: float) -> None:
+        """Sleep up to `seconds`, returning as soon as `fd` has data to read."""
+        if seconds <= 0:
+            return
+        try:
+            select.select([fd], [], [], seconds / self.speedup)
+        except (OSError, ValueError):  # a closed descriptor: just wait
+            time.sleep(seconds / self.speedup)
+
 
 class VirtualClock:
     """Simulated time that moves in `tick_s` steps when slept on, running peers every tick."""
@@ -44,6 +54,10 @@ class VirtualClock:
 
     def now(self) -> float:
         return self._ticks * self.tick_s
+
+    def wait_readable(self, fd: int, seconds: float) -> None:
+        """Data arrives only when the peers run: sleep (whole ticks)."""
+        self.sleep(seconds)
 
     def sleep(self, seconds: float) -> None:
         n = max(1, int(round(seconds / self.tick_s))) if seconds > 0 else 1

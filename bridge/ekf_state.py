@@ -1,9 +1,9 @@
 """The autopilot's EKF messages -> our state [x, y, psi, u, v, r], and a short prediction.
 
-Positions come from LOCAL_POSITION_NED (the scenario's local frame is the EKF origin) or,
-when the scenario gives a geodetic origin, from GLOBAL_POSITION_INT converted to local NED
-around that origin (flat earth, as ArduPilot's own `Location` offsets: fine over a canal's
-few kilometres). Heading and yaw rate come from ATTITUDE; body velocities u, v are the NED
+Positions come from GLOBAL_POSITION_INT converted to local NED around the geodetic origin
+that places the scenario on the Earth (flat earth, as ArduPilot's own `Location` offsets:
+fine over a canal's few kilometres), or from LOCAL_POSITION_NED, which is measured from the
+EKF origin (wherever the first GPS fix came), moved by where that origin lies. Heading and yaw rate come from ATTITUDE; body velocities u, v are the NED
 velocity rotated by the heading. A state is stamped with the autopilot's `time_boot_ms` and
 with the bridge's clock when it arrived (the older of its two messages).
 """
@@ -15,6 +15,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from controller.geodetic import geodetic_to_ned
 from controller.geometry import wrap_angle
 
 # EKF_STATUS_REPORT.flags (MAVLink EKF_STATUS_FLAGS).
@@ -25,7 +26,6 @@ EKF_POS_HORIZ_ABS = 16
 EKF_CONST_POS_MODE = 128
 EKF_UNINITIALIZED = 1024
 
-EARTH_RADIUS_M = 6378100.0  # ArduPilot's RADIUS_OF_EARTH (its LATLON_TO_M = 0.01113188 m per 1e-7 deg)
 MAX_ATTITUDE_SKEW_S = 0.5  # attitude older than this next to a position is not extrapolated
 
 
@@ -68,23 +68,6 @@ def body_velocity(v_north: float, v_east: float, psi: float) -> tuple[float, flo
     return c * v_north + s * v_east, -s * v_north + c * v_east
 
 
-def geodetic_to_ned(lat_deg: float, lon_deg: float, origin) -> tuple[float, float]:
-    """Latitude/longitude -> (north, east) metres from `origin` = (lat_deg, lon_deg, alt_m)."""
-    lat0, lon0 = float(origin[0]), float(origin[1])
-    dlon = (float(lon_deg) - lon0 + 180.0) % 360.0 - 180.0
-    north = math.radians(float(lat_deg) - lat0) * EARTH_RADIUS_M
-    east = math.radians(dlon) * EARTH_RADIUS_M * math.cos(math.radians(lat0))
-    return north, east
-
-
-def ned_to_geodetic(north: float, east: float, origin) -> tuple[float, float]:
-    """The inverse of `geodetic_to_ned` (for simulated autopilots and tests)."""
-    lat0, lon0 = float(origin[0]), float(origin[1])
-    lat = lat0 + math.degrees(float(north) / EARTH_RADIUS_M)
-    lon = lon0 + math.degrees(float(east) / (EARTH_RADIUS_M * math.cos(math.radians(lat0))))
-    return lat, (lon + 180.0) % 360.0 - 180.0
-
-
 def _heading_at(attitude, time_boot_s: float) -> float:
     """ATTITUDE's yaw carried to the position's time with its yaw rate (if close in time)."""
     dt = time_boot_s - attitude.time_boot_ms * 1e-3
@@ -94,13 +77,14 @@ def _heading_at(attitude, time_boot_s: float) -> float:
     return float(wrap_angle(psi))
 
 
-def state_from_local(attitude, local, received_s: float) -> EkfState:
-    """ATTITUDE + LOCAL_POSITION_NED (m, m/s) -> EkfState."""
+def state_from_local(attitude, local, received_s: float, offset_ne=(0.0, 0.0)) -> EkfState:
+    """ATTITUDE + LOCAL_POSITION_NED (m, m/s, from the EKF origin) -> EkfState, the position
+    moved by `offset_ne` (where the EKF origin lies in the frame wanted)."""
     t = local.time_boot_ms * 1e-3
     psi = _heading_at(attitude, t)
     u, v = body_velocity(local.vx, local.vy, psi)
-    return EkfState(t, float(received_s), float(local.x), float(local.y), psi, u, v,
-                    float(attitude.yawspeed))
+    return EkfState(t, float(received_s), float(local.x) + float(offset_ne[0]),
+                    float(local.y) + float(offset_ne[1]), psi, u, v, float(attitude.yawspeed))
 
 
 def state_from_global(attitude, position, origin, received_s: float) -> EkfState:

@@ -7,15 +7,21 @@ signing key is set, counts and skips garbage, and keeps the newest heartbeat, EK
 parameters and command acknowledgements. It measures the link delay with TIMESYNC (which
 ArduPilot answers) and logs every message sent and received to a .tlog as it goes.
 
+Times: every message is read as it arrives (the waits, `idle` included, wake on data with a
+real clock) and keeps its arrival time; the autopilot's `time_boot_ms` is mapped to the
+bridge's clock (`boot_clock`: TIMESYNC, checked against the arrivals), so a state's age is
+the time since the autopilot made it, link delay included.
+
 Nothing here blocks on the wall clock: `pump()` reads what is pending and returns, and every
-wait loops over `pump()` and `clock.sleep`, so a `VirtualClock` can run a simulated autopilot
-in the same thread.
+wait loops over `pump()` and the clock, so a `VirtualClock` can run a simulated autopilot in
+the same thread.
 """
 
 from __future__ import annotations
 
 import math
 import os
+import re
 import select
 import statistics
 import struct
@@ -27,9 +33,11 @@ from pathlib import Path
 from controller.errors import CanalnavError, InputError
 
 from bridge.ardupilot import MODE_NAMES, MODES, OVERRIDE_IGNORE, OVERRIDE_RELEASE
+from bridge.boot_clock import BootClock
 from bridge.signing import rejected_for_signature
 from bridge.ekf_state import (EkfState, horizontal_position_ok, state_from_global,
                               state_from_local)
+from controller.geodetic import geodetic_to_ned
 
 os.environ["MAVLINK20"] = "1"  # before the dialect loads: MAVLink 2 (needed for signing)
 from pymavlink import mavutil  # noqa: E402
@@ -45,6 +53,9 @@ VEHICLE_TYPES_NOT_AUTOPILOT = {mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CO
                                mavlink.MAV_TYPE_GIMBAL, mavlink.MAV_TYPE_ADSB}
 MAX_MESSAGES_PER_PUMP = 5000  # a flood cannot starve the control loop for long
 POLL_S = 0.01
+GLOBAL_STALE_MS = 1000  # LOCAL_POSITION_NED stands in when GLOBAL_POSITION_INT is this old
+FRAME_TOLERANCE_M = 1.0  # LOCAL (from the EKF origin) and GLOBAL must agree this well
+RC_PARAM = re.compile(r"^(RCMAP_[A-Z]+|RC\d+_[A-Z]+)$")  # what the RC mapping is made of
 
 
 class LinkError(CanalnavError):
@@ -73,6 +84,21 @@ class Heartbeat:
         return MODE_NAMES.get(self.custom_mode, f"mode {self.custom_mode}")
 
 
+@dataclass(frozen=True)
+class ParamChange:
+    """A parameter whose PARAM_VALUE differs from the value the bridge knew (bridge clock)."""
+
+    name: str
+    old: float
+    new: float
+    received_s: float
+    note: str = ""  # what the bridge did about it (e.g. the RC mapping it now uses)
+
+    def describe(self) -> str:
+        text = f"parameter {self.name} changed from {self.old:g} to {self.new:g}"
+        return f"{text}: {self.note}" if self.note else text
+
+
 @dataclass
 class LinkCounters:
     """What the link saw; strangers, rejected signatures and garbage are skipped, not fatal."""
@@ -83,6 +109,7 @@ class LinkCounters:
     rejected_signature: int = 0  # unsigned or badly signed while signing is on
     bad_data: int = 0  # bytes that did not parse (garbage, CRC errors)
     autopilot_restarts: int = 0  # time_boot_ms went backwards
+    frame_mismatches: int = 0  # LOCAL_POSITION_NED and GLOBAL_POSITION_INT disagreed
 
 
 def parse_url(url: str) -> tuple[str, int]:
@@ -130,20 +157,30 @@ class AutopilotLink:
         self.counters = LinkCounters()
         self.heartbeat: Heartbeat | None = None
         self.params: dict[str, float] = {}
+        self.param_changes: deque[ParamChange] = deque(maxlen=100)  # for the loop to log
+        self._fresh: set[str] = set()  # names answered since they were last asked for
+        self._absent: set[str] = set()  # optional names this firmware did not answer
         self.ekf_flags: int | None = None
-        self.rc_mapping = None  # RcMapping, set once the RC parameters are known
+        self.rc_mapping = None  # controller.pwm.CommandChannels, set once the RC parameters are known
         self.last_pwm: dict[int, int] = {}
         self.statustexts: deque[tuple[float, int, str]] = deque(maxlen=20)  # from the autopilot
         self._state: EkfState | None = None
         self._attitude = None  # (message, received_s)
-        self._position = None
+        self._position = None  # (source, message, received_s)
+        self._local = self._global = None  # the newest of each, (message, received_s)
+        self.ekf_origin = None  # (lat_deg, lon_deg, alt_m) from GPS_GLOBAL_ORIGIN
+        self._ekf_offset = None  # the EKF origin in the scenario's frame (north, east m)
+        self.position_source = None  # the message the state's position comes from
+        self.frame_mismatch_m = None  # newest LOCAL vs GLOBAL comparison
+        self.notices: deque[tuple[float, str]] = deque(maxlen=100)  # for the loop to log
+        self.servo_outputs: deque[tuple[float, tuple[int, ...]]] = deque(maxlen=400)
         self._last_rx_s: float | None = None
         self._last_boot_ms: int | None = None
         self._acks: list[tuple[int, int, float]] = []  # (command, result, received_s)
         self._hb_due = -math.inf
         self._ts_due = -math.inf
         self._timesync_pending: dict[int, float] = {}
-        self._timesync_delays: deque[float] = deque(maxlen=9)
+        self.boot_clock = BootClock()  # the autopilot's time since boot -> our clock
         self._ack_delays: deque[float] = deque(maxlen=9)
         self._statustext_id = 0
         self._epoch_us = int(time.time() * 1e6) - int(clock.now() * 1e6)
@@ -223,7 +260,10 @@ class AutopilotLink:
         now = self.clock.now()
         self._last_rx_s = now
         self.counters.received += 1
-        self._check_restart(getattr(msg, "time_boot_ms", None))
+        boot_ms = getattr(msg, "time_boot_ms", None)
+        self._check_restart(boot_ms)
+        if boot_ms is not None:
+            self.boot_clock.message(boot_ms * 1e-3, now)
         handler = getattr(self, f"_on_{kind.lower()}", None)
         if handler is not None:
             handler(msg, now)
@@ -241,6 +281,8 @@ class AutopilotLink:
         if self._last_boot_ms is not None and boot_ms + 500 < self._last_boot_ms:
             self.counters.autopilot_restarts += 1
             self._state = self._attitude = self._position = None
+            self._local = self._global = self._ekf_offset = self.ekf_origin = None
+            self.boot_clock.reset()
             self.ekf_flags = None
         self._last_boot_ms = boot_ms
 
@@ -252,32 +294,151 @@ class AutopilotLink:
     def _on_attitude(self, msg, now: float) -> None:
         self._attitude = (msg, now)
 
+    # Frames. The scenario is placed on the Earth by `geodetic_origin` (its (0, 0)); positions
+    # come from GLOBAL_POSITION_INT around it, or, while that is missing, from
+    # LOCAL_POSITION_NED (metres from the EKF origin, wherever the first GPS fix came) moved
+    # by where GPS_GLOBAL_ORIGIN puts the EKF origin. When both arrive they are compared.
+    # Without a geodetic origin the state stays in the EKF's own local frame (link tests;
+    # the onboard loop refuses to run that way).
     def _on_local_position_ned(self, msg, now: float) -> None:
+        self._local = (msg, now)
         if self.geodetic_origin is None:
-            self._position = (msg, now)
-            self._update_state()
+            self._use_position("LOCAL_POSITION_NED", msg, now)
+            return
+        self._check_frames()
+        global_fresh = (self._global is not None
+                        and msg.time_boot_ms - self._global[0].time_boot_ms <= GLOBAL_STALE_MS)
+        if self._ekf_offset is not None and not global_fresh:
+            self._use_position("LOCAL_POSITION_NED", msg, now)
 
     def _on_global_position_int(self, msg, now: float) -> None:
+        if self.geodetic_origin is None:
+            return
+        self._global = (msg, now)
+        self._check_frames()
+        self._use_position("GLOBAL_POSITION_INT", msg, now)
+
+    def _on_gps_global_origin(self, msg, now: float) -> None:
+        origin = (msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
+        if self.ekf_origin is not None and origin[:2] != self.ekf_origin[:2]:
+            self.notices.append((now, f"EKF origin moved to {origin[0]:.7f}, {origin[1]:.7f} "
+                                      f"(was {self.ekf_origin[0]:.7f}, {self.ekf_origin[1]:.7f})"))
+        self.ekf_origin = origin
+        self._ekf_offset = None
         if self.geodetic_origin is not None:
-            self._position = (msg, now)
-            self._update_state()
+            self._ekf_offset = geodetic_to_ned(origin[0], origin[1], self.geodetic_origin)
+
+    @property
+    def ekf_origin_ne(self) -> tuple[float, float] | None:
+        """Where GPS_GLOBAL_ORIGIN puts the EKF origin in the scenario's frame (m), or None."""
+        return self._ekf_offset
+
+    def _local_in_scenario(self, local) -> tuple[float, float]:
+        dn, de = self._ekf_offset
+        return float(local.x) + dn, float(local.y) + de
+
+    def _check_frames(self) -> None:
+        """Compare the newest LOCAL_POSITION_NED (moved by the EKF origin) with the newest
+        GLOBAL_POSITION_INT, carried to the same autopilot time with the velocity."""
+        if self._local is None or self._global is None or self._ekf_offset is None:
+            return
+        local, glob = self._local[0], self._global[0]
+        dt = (local.time_boot_ms - glob.time_boot_ms) * 1e-3
+        if abs(dt) > 0.2:
+            return
+        n, e = geodetic_to_ned(glob.lat * 1e-7, glob.lon * 1e-7, self.geodetic_origin)
+        n, e = n + glob.vx * 0.01 * dt, e + glob.vy * 0.01 * dt
+        ln, le = self._local_in_scenario(local)
+        miss = math.hypot(ln - n, le - e)
+        was_bad = self.frame_mismatch_m is not None and self.frame_mismatch_m > FRAME_TOLERANCE_M
+        self.frame_mismatch_m = miss
+        if miss > FRAME_TOLERANCE_M:
+            self.counters.frame_mismatches += 1
+            if not was_bad:
+                self.notices.append((self._global[1], self.frame_disagreement()))
+
+    def frame_disagreement(self) -> str:
+        """What the two position messages say, when they disagree (for the console and log)."""
+        local, glob = self._local[0], self._global[0]
+        ln, le = self._local_in_scenario(local)
+        n, e = geodetic_to_ned(glob.lat * 1e-7, glob.lon * 1e-7, self.geodetic_origin)
+        lat, lon = self.ekf_origin[:2]
+        return (f"LOCAL_POSITION_NED from the EKF origin {lat:.7f}, {lon:.7f} (GPS_GLOBAL_ORIGIN) "
+                f"puts the boat at x {ln:.1f} y {le:.1f} m, GLOBAL_POSITION_INT at x {n:.1f} "
+                f"y {e:.1f} m: {self.frame_mismatch_m:.1f} m apart")
+
+    def _use_position(self, source: str, msg, now: float) -> None:
+        self.position_source = source
+        self._position = (source, msg, now)
+        self._update_state()
 
     def _update_state(self) -> None:
         if self._attitude is None or self._position is None:
             return
-        (att, t_att), (pos, t_pos) = self._attitude, self._position
+        (att, t_att), (source, pos, t_pos) = self._attitude, self._position
         received = min(t_att, t_pos)
-        if self.geodetic_origin is None:
+        if source == "GLOBAL_POSITION_INT":
+            self._state = state_from_global(att, pos, self.geodetic_origin, received)
+        elif self.geodetic_origin is None:
             self._state = state_from_local(att, pos, received)
         else:
-            self._state = state_from_global(att, pos, self.geodetic_origin, received)
+            self._state = state_from_local(att, pos, received, self._ekf_offset)
+
+    def _on_servo_output_raw(self, msg, now: float) -> None:
+        """The autopilot's servo outputs 1-16 (us) at its time (s since boot)."""
+        if int(getattr(msg, "port", 0)) != 0:
+            return
+        pwm = tuple(int(getattr(msg, f"servo{i}_raw", 0) or 0) for i in range(1, 17))
+        t = msg.time_usec * 1e-6  # uint32 microseconds: wraps every 71.6 minutes
+        if self._last_boot_ms is not None:
+            wrap = 2 ** 32 * 1e-6
+            t += round((self._last_boot_ms * 1e-3 - t) / wrap) * wrap
+        self.servo_outputs.append((t, pwm))
 
     def _on_ekf_status_report(self, msg, now: float) -> None:
         self.ekf_flags = int(msg.flags)
 
     def _on_param_value(self, msg, now: float) -> None:
+        """A parameter's value (an answer, or a change made by anyone: ArduPilot sends every
+        change to all). A change is applied (the RC mapping follows its RCn_* and RCMAP_*)
+        and queued in `param_changes` for the loop to log."""
         name = msg.param_id.decode() if isinstance(msg.param_id, bytes) else str(msg.param_id)
-        self.params[name.rstrip("\x00")] = float(msg.param_value)
+        name = name.split("\x00", 1)[0]
+        value = float(msg.param_value)
+        if not math.isfinite(value):
+            self.counters.bad_data += 1
+            return
+        old = self.params.get(name)
+        self.params[name] = value
+        self._fresh.add(name)
+        if old is not None and old != value:
+            self.param_changes.append(ParamChange(name, old, value, now, self._follow(name)))
+
+    def _follow(self, name: str) -> str:
+        """Rebuild the RC mapping after a change to one of its parameters; what was done."""
+        from controller.pwm import CommandChannels
+
+        if self.rc_mapping is None or not RC_PARAM.match(name):
+            return ""
+        try:
+            mapping = CommandChannels.from_rc_params(self.params)
+        except (TypeError, ValueError) as exc:
+            return f"not applied, the RC mapping would be invalid ({exc}); previous kept"
+        if mapping == self.rc_mapping:
+            return ""
+        self.rc_mapping = mapping
+        m = mapping
+        return (f"RC mapping updated (steering RC{m.steering.channel} {m.steering.min}/"
+                f"{m.steering.trim}/{m.steering.max} us dead zone {m.steering.dz}"
+                f"{' reversed' if m.steering.reversed else ''}, throttle RC{m.throttle.channel} "
+                f"{m.throttle.min}/{m.throttle.trim}/{m.throttle.max} us dead zone "
+                f"{m.throttle.dz}{' reversed' if m.throttle.reversed else ''})")
+
+    def pop_param_changes(self) -> list[ParamChange]:
+        """The changes seen since the last call, oldest first."""
+        out = list(self.param_changes)
+        self.param_changes.clear()
+        return out
 
     def _on_command_ack(self, msg, now: float) -> None:
         target = getattr(msg, "target_system", 0)
@@ -294,7 +455,7 @@ class AutopilotLink:
             return
         sent = self._timesync_pending.pop(int(msg.ts1), None)
         if sent is not None:
-            self._timesync_delays.append(max(0.0, now - sent) / 2.0)
+            self.boot_clock.timesync(sent, now, msg.tc1 * 1e-9)
 
     # -- state ---------------------------------------------------------------------------------
     @property
@@ -315,8 +476,15 @@ class AutopilotLink:
 
     @property
     def state_age_s(self) -> float:
-        """Bridge-clock age of the newest state (inf if none)."""
-        return math.inf if self._state is None else self.clock.now() - self._state.received_s
+        """Age of the newest state on the bridge's clock: now less when the autopilot made
+        it (its time_boot_ms mapped by `boot_clock`), so it includes the link's delay; inf if
+        there is no state."""
+        if self._state is None:
+            return math.inf
+        made = self.boot_clock.to_bridge(self._state.time_boot_s)
+        if made is None:
+            made = self._state.received_s
+        return max(0.0, self.clock.now() - made)
 
     @property
     def state_fresh(self) -> bool:
@@ -330,8 +498,7 @@ class AutopilotLink:
     def link_delay_s(self) -> float:
         """One-way delay: half the median TIMESYNC round trip (else of the COMMAND_ACK round
         trips, which include the autopilot's handling); 0 before any was measured."""
-        samples = self._timesync_delays or self._ack_delays
-        return statistics.median(samples) if samples else 0.0
+        return self.boot_clock.delay_s
 
     # -- sending -------------------------------------------------------------------------------
     def _on_send(self, msg) -> None:
@@ -419,9 +586,30 @@ class AutopilotLink:
             self.pump()
             if predicate():
                 return True
-            if self.clock.now() >= deadline:
+            remaining = deadline - self.clock.now()
+            if remaining <= 0:
                 return False
-            self.clock.sleep(POLL_S)
+            self._wait(min(POLL_S, remaining))
+
+    def idle(self, seconds: float) -> None:
+        """Let `seconds` pass reading every message as it arrives (each keeps its arrival
+        time): how the loop waits between control steps."""
+        deadline = self.clock.now() + seconds
+        while True:
+            self.pump()
+            remaining = deadline - self.clock.now()
+            if remaining <= 1e-9:
+                return
+            self._wait(min(POLL_S, remaining))
+
+    def _wait(self, seconds: float) -> None:
+        """Sleep up to `seconds`, waking when the link has data (a real clock's select)."""
+        fd = getattr(self._conn, "fd", None)
+        wait = getattr(self.clock, "wait_readable", None)
+        if wait is not None and isinstance(fd, int) and fd >= 0:
+            wait(fd, seconds)
+        else:
+            self.clock.sleep(seconds)
 
     def wait_heartbeat(self, timeout_s: float = 30.0) -> Heartbeat:
         """Wait for a live autopilot heartbeat; it must come from a boat or a rover."""
@@ -438,6 +626,45 @@ class AutopilotLink:
         if refused:
             raise LinkError(refused[0])
         return self.heartbeat
+
+    def wait_past_startup(self, timeout_s: float = 60.0) -> Heartbeat:
+        """Wait until the heartbeat says the autopilot is running: not MAV_STATE_UNINIT, BOOT
+        or CALIBRATING, not in mode INITIALISING. ArduPilot answers MAVLink during its
+        start-up but sets some parameters (Rover: the RC dead zones) only at its end."""
+        from bridge.ardupilot import MAV_STATE_STARTING, MODES
+
+        def running() -> bool:
+            hb = self.heartbeat
+            return (hb is not None and hb.system_status not in MAV_STATE_STARTING
+                    and hb.custom_mode != MODES["INITIALISING"]
+                    and self.clock.now() - hb.received_s <= self.link_timeout_s)
+
+        if not self.wait_until(running, timeout_s):
+            hb = self.heartbeat
+            state = ("no heartbeat" if hb is None else
+                     f"HEARTBEAT system_status {MAV_STATE_STARTING.get(hb.system_status, hb.system_status)}"
+                     f", mode {hb.mode}")
+            raise LinkError(f"the autopilot is still starting up after {timeout_s:g} s ({state}); "
+                            "ArduPilot sets some parameters (the RC dead zones) only at the end "
+                            "of its start-up, so the bridge waits for it")
+        return self.heartbeat
+
+    def wait_ekf_origin(self, timeout_s: float = 5.0):
+        """Ask for GPS_GLOBAL_ORIGIN (MAV_CMD_REQUEST_MESSAGE) until it comes; the EKF origin
+        (lat, lon, alt), or None if it did not come within `timeout_s`."""
+        deadline = self.clock.now() + timeout_s
+        while self.ekf_origin is None and self.clock.now() < deadline:
+            self.command_long(mavlink.MAV_CMD_REQUEST_MESSAGE,
+                              mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN, timeout_s=0.5, retries=1)
+            self.wait_until(lambda: self.ekf_origin is not None,
+                            max(0.0, min(1.0, deadline - self.clock.now())))
+        return self.ekf_origin
+
+    def pop_notices(self) -> list[tuple[float, str]]:
+        """What the link noticed about the frames since the last call (bridge time, text)."""
+        out = list(self.notices)
+        self.notices.clear()
+        return out
 
     def wait_position_ok(self, timeout_s: float) -> EkfState:
         """Wait until the EKF reports a usable horizontal position and a fresh state exists."""
@@ -470,6 +697,7 @@ class AutopilotLink:
             if self.wait_until(answered, timeout_s):
                 result, t = found[0]
                 self._ack_delays.append(max(0.0, t - sent) / 2.0)
+                self.boot_clock.fallback_delay_s = statistics.median(self._ack_delays)
                 return result
         return None
 
@@ -498,33 +726,51 @@ class AutopilotLink:
             alias = next((pair for pair in PARAM_ALIASES.values() if name in pair), (name,))
             if alias not in groups:
                 groups.append(alias)
-        extra = [n for n in optional if not any(n in g for g in groups)]
+        extra = [n for n in optional if not any(n in g for g in groups) and n not in self._absent]
+
+        fresh = self._fresh
 
         def missing():
-            return [g for g in groups if not any(n in self.params for n in g)]
+            return [g for g in groups if not any(n in fresh for n in g)]
 
         for name in [n for g in groups for n in g] + extra:
-            self.params.pop(name, None)  # read fresh values
+            fresh.discard(name)  # read fresh values (the known ones stay, to see changes)
         for attempt in range(max(1, retries)):
             todo = missing()
             if not todo and attempt > 0:
                 break
-            ask = [n for g in todo for n in g] + ([n for n in extra if n not in self.params]
+            ask = [n for g in todo for n in g] + ([n for n in extra if n not in fresh]
                                                  if attempt == 0 else [])
             ts, tc = self._target()
             for name in ask:
                 self._conn.mav.param_request_read_send(ts, tc, name.encode(), -1)
             if self.wait_until(lambda: not missing(), timeout_s):
-                self.wait_until(lambda: all(n in self.params for n in extra), min(0.2, timeout_s))
+                self.wait_until(lambda: all(n in fresh for n in extra), min(0.2, timeout_s))
                 break
         out = {}
         for g in groups:
             for n in g:
-                if n in self.params:
+                if n in fresh:
                     out.update({alias: self.params[n] for alias in g})
                     break
-        out.update({n: self.params[n] for n in extra if n in self.params})
+        out.update({n: self.params[n] for n in extra if n in fresh})
         return out
+
+    def wait_params_settled(self, names, *, optional=(), timeout_s: float = 10.0) -> dict[str, float]:
+        """Read `names` (as `fetch_params`) until two reads in a row agree: values that are
+        still being set (the end of a start-up, a ground station writing them) are not used."""
+        deadline = self.clock.now() + timeout_s
+        previous = self.fetch_params(names, optional=optional)
+        self._absent.update(n for n in optional if n not in previous)
+        while True:
+            got = self.fetch_params(names, optional=optional)
+            if got == previous:
+                return got
+            if self.clock.now() >= deadline:
+                moving = sorted(n for n in set(got) | set(previous) if got.get(n) != previous.get(n))
+                raise LinkError(f"parameters still changing after {timeout_s:g} s: "
+                                + ", ".join(f"{n} {previous.get(n)} -> {got.get(n)}" for n in moving))
+            previous = got
 
     def _refusal(self, what: str, result: int | None) -> LinkError:
         if result is None:

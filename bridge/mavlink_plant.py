@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bridge.ardupilot import SITL_DEFAULT_HOME
 from bridge.clock import VirtualClock
 from scenarios.plants.plant import PlantFailure, PlantOutput
 
@@ -70,10 +71,12 @@ class MavlinkSimPlant:
                                     latency_s=faults.latency_s, seed=faults.seed)
             self.clock.add_peer(self.relay.pump)
             port = self.relay.port
+        # the simulator puts a scenario without [origin] at SITL's home: so does the link
+        self.origin = scenario.geodetic_origin or SITL_DEFAULT_HOME
         self.link = AutopilotLink(f"udpout:127.0.0.1:{port}", self.clock,
                                   signing_key=signing_key,
                                   tlog_path=self.out_dir / "mavlink.tlog",
-                                  geodetic_origin=scenario.geodetic_origin)
+                                  geodetic_origin=self.origin)
         self.clock.add_peer(lambda now: self.link.pump())
         self._t0 = 0.0
         self._last_sent = (None, -np.inf)
@@ -86,7 +89,8 @@ class MavlinkSimPlant:
                 not np.allclose(current_ne, self.scenario.current_ne):
             raise ValueError("the simulated autopilot starts where its scenario says; "
                              "reset() must be given that initial state and current")
-        prepare_link(self.link, self.scenario, BridgeOptions(mode="MANUAL", arm=True))
+        prepare_link(self.link, self.scenario,
+                     BridgeOptions(mode="MANUAL", arm=True, origin=self.origin))
         self._t0 = self.clock.now()
         return self._output()
 

@@ -59,6 +59,9 @@ class BridgeOptions:
     speedup: float = 1.0
     ekf_timeout_s: float = 120.0
     heartbeat_timeout_s: float = 30.0
+    startup_timeout_s: float = 60.0  # for the autopilot to finish its start-up
+    origin: tuple | None = None  # (lat_deg, lon_deg, alt_m) of the scenario's (0, 0); else its [origin]
+    origin_timeout_s: float = 5.0  # for GPS_GLOBAL_ORIGIN
     stream_rate_hz: float = 20.0
     control_period_s: float = 0.1
     seed: int | None = None  # simulated LiDAR noise (default: the scenario's seed)
@@ -90,39 +93,136 @@ def _say(console, text: str) -> None:
         console.flush()
 
 
-def prepare_link(link, scenario, options: BridgeOptions = BridgeOptions(), console=None) -> Preparation:
-    """Heartbeat, stream rates, RC parameters, pre-flight checks, EKF position, then the mode
-    and arming if asked. Raises PreflightRefused (with reasons) or LinkError (no answer)."""
-    from bridge import preflight
-    from bridge.rc_mapping import RcMapping
+NO_ORIGIN = (
+    "no geodetic origin: the scenario {source} has no [origin] and --origin was not given. "
+    "ArduPilot measures LOCAL_POSITION_NED from its EKF origin, which is wherever the boat was "
+    "at its first GPS fix, not the scenario's (0, 0); the bridge places the scenario on the "
+    "Earth instead. Give the latitude and longitude of the scenario's (0, 0): "
+    "[origin] lat_deg = ..., lon_deg = ... in the scenario file, or --origin=LAT,LON[,ALT] "
+    "(against ArduPilot SITL or canalnav autopilot-sim with a scenario without [origin], "
+    "their default home: --origin={home}; with '=' since it starts with a minus)")
 
-    link.geodetic_origin = scenario.geodetic_origin
+
+def geodetic_origin(scenario, options: BridgeOptions):
+    """The scenario's place on the Earth: --origin, else its [origin]; InputError if none."""
+    from bridge.ardupilot import SITL_DEFAULT_HOME
+
+    origin = options.origin or scenario.geodetic_origin
+    if origin is None:
+        home = format_origin(SITL_DEFAULT_HOME)
+        raise InputError(NO_ORIGIN.format(source=scenario.path or scenario.name, home=home))
+    return tuple(float(v) for v in origin)
+
+
+def format_origin(origin) -> str:
+    """(lat, lon, alt) as `LAT,LON,ALT` for --origin (to 1e-7 degrees, about a centimetre)."""
+    return ",".join(f"{float(v):.7f}".rstrip("0").rstrip(".") for v in origin)
+
+
+def parse_origin(text: str) -> tuple[float, float, float]:
+    """`LAT,LON[,ALT]` (degrees, metres) -> (lat, lon, alt); InputError names the problem."""
+    parts = [p.strip() for p in str(text).split(",")]
+    if len(parts) not in (2, 3):
+        raise InputError(f"--origin {text!r}: expected LAT,LON or LAT,LON,ALT (degrees, metres)")
+    try:
+        values = [float(p) for p in parts] + ([0.0] if len(parts) == 2 else [])
+    except ValueError:
+        raise InputError(f"--origin {text!r}: not numbers (expected LAT,LON[,ALT])") from None
+    lat, lon, alt = values
+    if not all(math.isfinite(v) for v in values) or not -90 <= lat <= 90 or not -180 <= lon <= 180:
+        raise InputError(f"--origin {text!r}: latitude must lie in -90..90 and longitude in "
+                         "-180..180 degrees")
+    return lat, lon, alt
+
+
+def _check_ekf_origin(link, options, console) -> None:
+    """GPS_GLOBAL_ORIGIN: where the EKF origin is, and whether LOCAL_POSITION_NED moved by it
+    agrees with GLOBAL_POSITION_INT (refused if not)."""
+    from bridge.link import FRAME_TOLERANCE_M
+
+    origin = link.wait_ekf_origin(options.origin_timeout_s)
+    if origin is None:
+        _say(console, f"note: no GPS_GLOBAL_ORIGIN within {options.origin_timeout_s:g} s: "
+                      "positions from GLOBAL_POSITION_INT only, LOCAL_POSITION_NED not "
+                      "cross-checked")
+        return
+    n, e = link.ekf_origin_ne
+    _say(console, f"EKF origin: {origin[0]:.7f}, {origin[1]:.7f} ({n:.1f} m north, {e:.1f} m "
+                  "east of the scenario's (0, 0): where the boat was at its first GPS fix)")
+    link.frame_mismatch_m = None
+    link.wait_until(lambda: link.frame_mismatch_m is not None, 1.0)
+    if link.frame_mismatch_m is not None and link.frame_mismatch_m > FRAME_TOLERANCE_M:
+        raise PreflightRefused([link.frame_disagreement() + "; the autopilot's frames disagree"])
+    link.pop_notices()
+
+
+def _rc_summary(m) -> str:
+    def one(c):
+        rev = ", reversed" if c.reversed else ""
+        return f"channel {c.channel} ({c.min}/{c.trim}/{c.max} us, dead zone {c.dz} us{rev})"
+    return f"RC: throttle {one(m.throttle)}, steering {one(m.steering)}"
+
+
+def _read_rc_params(link) -> dict:
+    """The parameters the pre-flight checks and the RC mapping need, read until settled."""
+    from bridge import preflight
+
+    params = link.wait_params_settled(preflight.BASE_PARAMS + preflight.GCS_SYSID_NAMES,
+                                      optional=(preflight.GCS_SYSID_HIGH,))
+    params.update(link.wait_params_settled(preflight.channel_params(params)))
+    return params
+
+
+def prepare_link(link, scenario, options: BridgeOptions = BridgeOptions(), console=None) -> Preparation:
+    """Bounded, named waits from "heard nothing" to "ready to steer", as ArduPilot's autotest
+    does them: heartbeat, past start-up, stream rates, RC parameters (read until settled),
+    pre-flight checks, EKF position, the RC parameters again just before taking control, then
+    the mode and arming if asked. Raises PreflightRefused (with reasons) or LinkError."""
+    from bridge import preflight
+    from controller.pwm import CommandChannels
+
+    link.geodetic_origin = geodetic_origin(scenario, options)
     hb = link.wait_heartbeat(options.heartbeat_timeout_s)
     _say(console, f"autopilot: system {hb.system_id} component {hb.component_id}, "
                   f"{'boat' if hb.type == preflight.MAV_TYPE_SURFACE_BOAT else 'rover'}, "
                   f"{hb.mode}, {'armed' if hb.armed else 'disarmed'}")
+    if hb.custom_mode == 16 or hb.system_status in (0, 1, 2):
+        _say(console, "autopilot: starting up; waiting for it to finish before reading "
+                      "parameters")
+    hb = link.wait_past_startup(options.startup_timeout_s)
     streams = link.request_streams(options.stream_rate_hz)
     unanswered = [k for k, v in streams.items() if v != 0]
     if unanswered:
         _say(console, "note: SET_MESSAGE_INTERVAL not accepted for " + ", ".join(
             f"{k} ({'no answer' if streams[k] is None else f'result {streams[k]}'})" for k in unanswered))
-    params = link.fetch_params(preflight.BASE_PARAMS + preflight.GCS_SYSID_NAMES,
-                               optional=(preflight.GCS_SYSID_HIGH,))
-    params.update(link.fetch_params(preflight.channel_params(params)))
+    params = _read_rc_params(link)
     reasons = preflight.refusals(link.heartbeat, params, system_id=link.system_id,
                                  requested_mode=options.mode)
     if reasons:
         raise PreflightRefused(reasons)
-    link.rc_mapping = RcMapping.from_params(params)
+    link.rc_mapping = CommandChannels.from_rc_params(params)
     notes = preflight.notes(link.heartbeat, params, arm=options.arm, requested_mode=options.mode)
     for note in notes:
         _say(console, f"note: {note}")
-    m = link.rc_mapping
-    _say(console, f"RC: throttle channel {m.throttle.channel} ({m.throttle.min:g}/{m.throttle.trim:g}/"
-                  f"{m.throttle.max:g} us), steering channel {m.steering.channel} "
-                  f"({m.steering.min:g}/{m.steering.trim:g}/{m.steering.max:g} us)")
+    _say(console, _rc_summary(link.rc_mapping))
     link.wait_position_ok(options.ekf_timeout_s)
     _say(console, "EKF: horizontal position usable")
+    _check_ekf_origin(link, options, console)
+    # again, just before taking control: a parameter may have changed while we waited
+    again = _read_rc_params(link)
+    changed = sorted(n for n in set(params) | set(again) if params.get(n) != again.get(n))
+    if changed:
+        for n in changed:
+            _say(console, f"note: {n} changed from {params.get(n)} to {again.get(n)} since it was "
+                          "first read; using the new value")
+        reasons = preflight.refusals(link.heartbeat, again, system_id=link.system_id,
+                                     requested_mode=options.mode)
+        if reasons:
+            raise PreflightRefused(reasons)
+        link.rc_mapping = CommandChannels.from_rc_params(again)
+        _say(console, _rc_summary(link.rc_mapping))
+    params = again
+    link.pop_param_changes()  # accounted for; the loop logs those that come from now on
     if options.mode:  # always: the heartbeat (1 Hz) may not show our own HOLD yet
         link.set_mode(options.mode)
         _say(console, f"mode set to {options.mode.upper()}")
@@ -130,6 +230,40 @@ def prepare_link(link, scenario, options: BridgeOptions = BridgeOptions(), conso
         link.arm()
         _say(console, "armed")
     return Preparation(link.heartbeat, params, streams, notes)
+
+
+def link_fault(link) -> str | None:
+    """Why nothing may be steered now (short: it goes to the ground station), or None: the
+    link lost, the state stale, the EKF's position unusable."""
+    if not link.alive:
+        return f"link lost ({link.silence_s:.1f} s silent)"
+    if not link.state_fresh:
+        return f"state stale ({link.state_age_s:.1f} s old)"
+    if not link.horizontal_position_ok:
+        flags = link.ekf_flags
+        return f"EKF position unusable (flags {'none' if flags is None else hex(flags)})"
+    return None
+
+
+def safe_stop(link, options: BridgeOptions, reason: str, severity: int) -> str:
+    """Neutral (`safe_repeats` times, 50 ms apart), overrides released, HOLD if the mode is
+    ours, then the reason to the ground station; what happened to the mode (for the console)."""
+    if link.rc_mapping is not None:
+        for _ in range(options.safe_repeats):
+            link.send_neutral()
+            link.idle(0.05)
+        for _ in range(options.safe_repeats):
+            link.release()
+            link.idle(0.05)
+    held = ""
+    if options.mode:
+        try:
+            link.set_mode("HOLD", timeout_s=0.5, retries=2)
+            held = ", HOLD"
+        except CanalnavError as exc:
+            held = f", HOLD failed ({exc})"
+    link.statustext(f"canalnav: {reason}", severity)
+    return held
 
 
 def nearest_segment_m(position, segments) -> float:
@@ -197,7 +331,7 @@ class OnboardLoop:
             if self.options.duration_s is not None and t >= self.options.duration_s:
                 self._stop("time limit", MAV_SEVERITY_WARNING)
                 return self._result(EXIT_STOPPED, "time limit")
-            fault = self._fault()
+            fault = self._follow_params(t) or self._fault()
             if fault is None:
                 state = self.link.state
                 if np.hypot(state.x - goal[0], state.y - goal[1]) <= self.scenario.goal_radius_m:
@@ -216,21 +350,34 @@ class OnboardLoop:
             next_t += period
             wait = next_t - self.clock.now()
             if wait > 1e-9:
-                self.clock.sleep(wait)
+                self.link.idle(wait)  # messages are read (and stamped) as they arrive
             else:
                 next_t = self.clock.now()
 
+    def _follow_params(self, t: float) -> str | None:
+        """Log each parameter the autopilot reported changed (the link has applied it: the RC
+        mapping follows); a change that makes the autopilot ignore us is a fault."""
+        from bridge import preflight
+
+        hb = self.link.heartbeat
+        for _, notice in self.link.pop_notices():
+            self.log.event(t, notice, hb.mode if hb else "", hb.armed if hb else None)
+            self._say(f"bridge: {notice}")
+        changes = self.link.pop_param_changes()
+        if not changes:
+            return None
+        for change in changes:
+            self.log.event(t, change.describe(), hb.mode if hb else "", hb.armed if hb else None)
+            self._say(f"bridge: {change.describe()}")
+        names = {c.name for c in changes}
+        reasons = [r for r in preflight.refusals(hb, self.link.params, system_id=self.link.system_id,
+                                                 requested_mode=self.options.mode or "MANUAL")
+                   if any(n in r for n in names)]
+        return f"parameter change: {reasons[0]}" if reasons else None
+
     def _fault(self) -> str | None:
         """Why the loop must not steer now (short: it goes to the ground station), or None."""
-        link = self.link
-        if not link.alive:
-            return f"link lost ({link.silence_s:.1f} s silent)"
-        if not link.state_fresh:
-            return f"state stale ({link.state_age_s:.1f} s old)"
-        if not link.horizontal_position_ok:
-            flags = link.ekf_flags
-            return f"EKF position unusable (flags {'none' if flags is None else hex(flags)})"
-        return None
+        return link_fault(self.link)
 
     def _step(self, t: float) -> str | None:
         """One control period; returns a fault that calls for the failsafe, else None."""
@@ -264,28 +411,10 @@ class OnboardLoop:
         return None
 
     # -- stopping ------------------------------------------------------------------------------
-    def _pause(self, seconds: float) -> None:
-        self.clock.sleep(seconds)
-        self.link.pump()
-
     def _stop(self, reason: str, severity: int) -> None:
         """Neutral, release, HOLD (if the mode is ours), then tell the ground station."""
         link = self.link
-        if link.rc_mapping is not None:
-            for _ in range(self.options.safe_repeats):
-                link.send_neutral()
-                self._pause(0.05)
-            for _ in range(self.options.safe_repeats):
-                link.release()
-                self._pause(0.05)
-        held = ""
-        if self.options.mode:
-            try:
-                link.set_mode("HOLD", timeout_s=0.5, retries=2)
-                held = ", HOLD"
-            except CanalnavError as exc:
-                held = f", HOLD failed ({exc})"
-        link.statustext(f"canalnav: {reason}", severity)
+        held = safe_stop(link, self.options, reason, severity)
         self._actuators = np.zeros(2)
         t = self.clock.now() - self._t0
         hb = link.heartbeat
@@ -373,6 +502,11 @@ def run_bridge(options: BridgeOptions, console=sys.stderr) -> BridgeResult:
         if value is not None and not (math.isfinite(value) and value > 0):
             raise InputError(f"{name} must be a positive number, got {value!r}")
     scenario = load_scenario(options.scenario)
+    origin = geodetic_origin(scenario, options)  # before connecting: refuse at once
+    if options.origin and scenario.geodetic_origin and tuple(options.origin) != tuple(
+            scenario.geodetic_origin):
+        _say(console, f"bridge: --origin={format_origin(options.origin)} replaces the "
+                      "scenario's [origin]")
     key = None
     if options.signing_key is not None:
         from bridge.signing import load_signing_key
@@ -387,7 +521,7 @@ def run_bridge(options: BridgeOptions, console=sys.stderr) -> BridgeResult:
         component_id=options.component_id, target_system=options.target_system,
         signing_key=key, tlog_path=None if log_dir is None else log_dir / "mavlink.tlog",
         link_timeout_s=options.link_timeout_s, stale_s=options.stale_s,
-        geodetic_origin=scenario.geodetic_origin)
+        geodetic_origin=origin)
     log = None
     try:
         controller = NmpcController(scenario)

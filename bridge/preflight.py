@@ -10,7 +10,7 @@ to the servos.
 from __future__ import annotations
 
 from bridge.ardupilot import MODE_NAMES, MODES, PARAM_ALIASES, RC_OPTION_IGNORE_OVERRIDES
-from bridge.rc_mapping import RcMapping
+from controller.pwm import CommandChannels
 
 MAV_TYPE_GROUND_ROVER = 10
 MAV_TYPE_SURFACE_BOAT = 11
@@ -91,7 +91,7 @@ def refusals(heartbeat, params: dict, *, system_id: int, requested_mode: str | N
 
     if all(k in params for k in ("RCMAP_ROLL", "RCMAP_THROTTLE")):
         try:
-            RcMapping.from_params(params)
+            CommandChannels.from_rc_params(params)
         except (TypeError, ValueError) as exc:
             out.append(f"RC mapping: {exc}")
         else:

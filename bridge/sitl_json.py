@@ -37,7 +37,7 @@ import numpy as np
 
 from controller.errors import InputError
 
-from .rc_mapping import RcCalibration, RcMapping
+from controller.pwm import CommandChannels, PwmChannel
 
 log = logging.getLogger(__name__)
 
@@ -101,17 +101,17 @@ def encode_servo_packet(packet: ServoPacket) -> bytes:
             + struct.pack(f"<{len(packet.pwm)}H", *packet.pwm))
 
 
-def servo_calibration(channel: int) -> RcCalibration:
+def servo_calibration(channel: int) -> PwmChannel:
     """A Rover servo output (1000-2000 us, trim 1500, no dead zone) on `channel`."""
-    return RcCalibration(channel, SERVO_MIN, SERVO_MAX, SERVO_TRIM, 0.0)
+    return PwmChannel(channel, SERVO_MIN, SERVO_MAX, SERVO_TRIM)
 
 
-def pwm_to_commands(pwm: tuple[int, ...], steering: RcCalibration,
-                    throttle: RcCalibration) -> tuple[float, float]:
+def pwm_to_commands(pwm: tuple[int, ...], steering: PwmChannel,
+                    throttle: PwmChannel) -> tuple[float, float]:
     """Servo PWM to our (nT, nS) percent. Steering above trim turns to starboard, which is
     nS < 0 in our model; throttle below trim is reverse; 0 (or a missing channel) is neutral."""
     live = {channel: value for channel, value in enumerate(pwm, start=1) if value != 0}
-    return RcMapping(steering, throttle).to_commands(live)  # a missing channel reads trim
+    return CommandChannels(steering, throttle).to_commands(live)  # a missing channel reads trim
 
 
 @dataclass(frozen=True)
@@ -335,9 +335,13 @@ def sitl_command(parm_file: Path, port: int = DEFAULT_PORT, host: str = DEFAULT_
     """The sim_vehicle.py command that starts ArduRover (boat) on this backend.
 
     `--model JSON:IP` names where SITL sends its packets; instance I sends to 9002 + 10 I,
-    any other port goes to the SITL binary as `--sim-port-out` (through `-A`). Home is the
-    scenario's geodetic origin when it has one (positions are NED metres from home).
+    any other port goes to the SITL binary as `--sim-port-out` (through `-A`). Home, where
+    the scenario's (0, 0) is on the Earth (positions are NED metres from it), is the
+    scenario's geodetic origin, else SITL's own default (given explicitly, so that the
+    bridge's `--origin` can match it).
     """
+    from bridge.ardupilot import SITL_DEFAULT_HOME
+
     target = "127.0.0.1" if host in ("", "127.0.0.1") else host
     if target in ("0.0.0.0", "::"):
         target = "<this machine's address>"
@@ -349,7 +353,20 @@ def sitl_command(parm_file: Path, port: int = DEFAULT_PORT, host: str = DEFAULT_
             parts.append(f"-I {instance}")
         else:
             parts.append(f'-A "--sim-port-out={port}"')
-    if geodetic_origin is not None:
-        lat, lon, alt = geodetic_origin
-        parts.append(f"--custom-location={lat:.8f},{lon:.8f},{alt:g},0")
+    lat, lon, alt = geodetic_origin if geodetic_origin is not None else SITL_DEFAULT_HOME
+    parts.append(f"--custom-location={lat:.8f},{lon:.8f},{alt:g},0")
+    return " ".join(parts)
+
+
+def bridge_command(scenario_file, geodetic_origin: tuple | None) -> str:
+    """The `canalnav bridge` command that drives that SITL through the MAVProxy output
+    sim_vehicle.py opens on udp 14550, in the frame SITL's home puts the scenario in: a
+    scenario without [origin] needs `--origin` at SITL's default home."""
+    from bridge.ardupilot import SITL_DEFAULT_HOME
+    from bridge.onboard import format_origin
+
+    parts = ["canalnav bridge --connect udp:127.0.0.1:14550", f"--scenario {scenario_file}"]
+    if geodetic_origin is None:
+        parts.append(f"--origin={format_origin(SITL_DEFAULT_HOME)}")  # "=": it starts with a minus
+    parts.append("--mode MANUAL --arm")
     return " ".join(parts)

@@ -1,7 +1,8 @@
 """The bridge's per-step CSV log and its one-line console status, written as the run goes.
 
 `steps.csv` has a row per control step (time, reported and predicted state, commands, PWM
-sent, delays, status) and a row per event (failsafe, resume, goal) with the state columns
+sent, the measured one-way link delay and the state's age since the autopilot made it,
+status) and a row per event (failsafe, resume, goal) with the state columns
 empty; `segments.csv` the segments each step used. Both are flushed after every row, so a
 crash or a pulled plug loses nothing before it.
 """
@@ -104,10 +105,11 @@ def _num(v) -> str:
 
 
 def status_line(s: Step) -> str:
-    """One console line: time, mode, arming, position, speed, commands, nearest wall, delay."""
+    """One console line: time, mode, arming, position, speed, commands, nearest wall, the
+    measured link delay and the state's age (since the autopilot made it)."""
     x, y, psi, u, v, _ = s.state
     near = f"{s.nearest_segment_m:5.1f} m" if math.isfinite(s.nearest_segment_m) else "  --   "
     return (f"t {s.time_s:7.1f} s  {s.mode:<8} {'ARMED' if s.armed else 'disarmed':<8} "
             f"x {x:8.1f} y {y:8.1f} hdg {math.degrees(psi) % 360:5.1f}  {math.hypot(u, v):4.2f} m/s  "
             f"nT {s.command[0]:6.1f} nS {s.command[1]:6.1f} %  wall {near}  "
-            f"delay {s.link_delay_s * 1e3:4.0f} ms  {s.status}")
+            f"delay {s.link_delay_s * 1e3:4.0f} ms  age {s.state_age_s * 1e3:4.0f} ms  {s.status}")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 import sys
 
 
@@ -10,8 +11,11 @@ def register(sub) -> None:
         "autopilot-sim", help="simulated ArduPilot Rover (boat) speaking MAVLink 2, FMU physics",
         description="Serve a simulated ArduPilot Rover (boat frame) on a MAVLink connection: "
         "heartbeat, parameters, arming, modes, RC overrides, EKF-style state streams, with the "
-        "boat FMU started from the scenario's initial state. Boots disarmed in MANUAL; the "
-        "position estimate is ready --ekf-delay seconds after boot.",
+        "boat FMU started from the scenario's initial state. Starts up like Rover (INITIALISING "
+        "for --init-delay seconds, the RC dead zones set at its end), then MANUAL, disarmed; "
+        "the first GPS fix (and the EKF origin, wherever the boat is then) comes --ekf-delay "
+        "seconds after boot. With --log it writes ArduPilot DataFlash logs (.BIN) as it goes. "
+        "Ctrl-C or SIGTERM stops it.",
     )
     p.add_argument("--listen", required=True, metavar="URL",
                    help="pymavlink connection string, e.g. udpin:127.0.0.1:14550 (the bridge "
@@ -25,7 +29,14 @@ def register(sub) -> None:
                    help="MAVLink 2 signing key file: 32 raw bytes, 64 hex characters, or a "
                    "passphrase (its SHA-256); unsigned messages are then ignored")
     p.add_argument("--ekf-delay", type=float, default=20.0, metavar="S",
-                   help="seconds after boot before the position estimate is ready (default 20)")
+                   help="seconds after boot to the first GPS fix, when the position estimate is "
+                   "ready and the EKF origin is set (default 20)")
+    p.add_argument("--init-delay", type=float, default=3.0, metavar="S",
+                   help="seconds the start-up takes (mode INITIALISING; default 3)")
+    p.add_argument("--log", metavar="DIR",
+                   help="write the onboard DataFlash log here, one file per boot "
+                   "(00000001.BIN, ...: PARM, MODE, ARM, MSG, ORGN, XKF1, ATT, POS, GPS, IMU, "
+                   "RCIN, RCOU), for `canalnav sysid LOG.BIN`")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    help="set an autopilot parameter at boot (repeatable), e.g. RC1_MIN=1000")
     p.add_argument("--duration", type=float, default=None, metavar="S",
@@ -66,6 +77,8 @@ def run(args) -> int:
         raise InputError(f"--speedup must be positive, got {args.speedup}")
     if args.ekf_delay < 0:
         raise InputError(f"--ekf-delay must be >= 0, got {args.ekf_delay}")
+    if not args.init_delay >= 0:
+        raise InputError(f"--init-delay must be >= 0, got {args.init_delay}")
     scenario = load_scenario(args.scenario)
     key = load_signing_key(args.signing_key) if args.signing_key else None
     params = parse_params(args.param)
@@ -73,7 +86,12 @@ def run(args) -> int:
     clock = RealClock(args.speedup)
     sim = AutopilotSim(scenario, args.listen, clock, seed=seed, signing_key=key, params=params,
                        ekf_delay_s=args.ekf_delay, legacy_param_names=args.legacy_param_names,
-                       system_id=args.system_id)
+                       system_id=args.system_id, init_s=args.init_delay, log_dir=args.log)
+
+    def terminate(signum, frame):
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, terminate)  # a script's kill ends it as Ctrl-C
     try:
         print(f"autopilot-sim: ArduPilot Rover (simulated), system {args.system_id}, listening "
               f"on {args.listen}, scenario {scenario.name}, {args.speedup:g}x real time"
@@ -82,5 +100,9 @@ def run(args) -> int:
     except KeyboardInterrupt:
         print("autopilot-sim: stopped", file=sys.stderr)
     finally:
+        signal.signal(signal.SIGTERM, previous)
         sim.close()
+        if sim.log_paths:
+            print("autopilot-sim: DataFlash log(s): " + ", ".join(map(str, sim.log_paths)),
+                  file=sys.stderr)
     return 0

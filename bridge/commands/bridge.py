@@ -23,6 +23,11 @@ def register(sub) -> None:
     p.add_argument("--lidar", default="sim", metavar="SOURCE",
                    help="sim (the scenario's canal seen at the reported pose; default) or "
                    "replay:DIR (one .npy/.bin scan per file, named by its timestamp in ns)")
+    p.add_argument("--origin", metavar="LAT,LON[,ALT]",
+                   help="where the scenario's (0, 0) is on the Earth (degrees, metres; write "
+                   "--origin=-35.36,149.17 when the latitude is negative); default: the "
+                   "scenario's [origin]. One of the two is required: ArduPilot's local frame "
+                   "starts wherever its first GPS fix came")
     p.add_argument("--arm", action="store_true", help="arm the autopilot (never without this)")
     p.add_argument("--mode", metavar="NAME",
                    help="switch to this mode (e.g. MANUAL) before driving, HOLD on a failsafe; "
@@ -56,7 +61,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from bridge.onboard import BridgeOptions, run_bridge
+    from bridge.onboard import BridgeOptions, parse_origin, run_bridge
 
     options = BridgeOptions(
         connect=args.connect, scenario=args.scenario, lidar=args.lidar, arm=args.arm,
@@ -65,7 +70,7 @@ def run(args) -> int:
         component_id=args.component_id, target_system=args.target_system,
         link_timeout_s=args.link_timeout, stale_s=args.stale_after, speedup=args.speedup,
         ekf_timeout_s=args.ekf_timeout, heartbeat_timeout_s=args.heartbeat_timeout,
-        seed=args.seed,
+        seed=args.seed, origin=None if args.origin is None else parse_origin(args.origin),
     )
     result = run_bridge(options)
     print(f"canalnav bridge: {result.reason} after {result.steps} control steps"

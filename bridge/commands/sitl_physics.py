@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import signal
 import sys
 from pathlib import Path
 
@@ -18,7 +19,7 @@ def register(sub) -> None:
         "counter, with the boat's state as JSON. The boat starts at the scenario's initial "
         "state, in its current, with its plant parameters and actuator rates. Start SITL "
         "as printed (ArduRover as a boat, bridge/sitl_boat.parm), then drive it with "
-        "`canalnav bridge`. See bridge/SITL.md. Ctrl-C stops.",
+        "`canalnav bridge`. See bridge/SITL.md. Ctrl-C or SIGTERM stops it, with a summary.",
     )
     p.add_argument("--scenario", required=True, help="scenario file (TOML)")
     p.add_argument("--port", type=int, default=None,
@@ -42,7 +43,7 @@ def run(args) -> int:
     from controller.errors import InputError
     from scenarios.scenario_file import load_scenario
 
-    from bridge.sitl_json import DEFAULT_PORT, SitlPhysicsServer, sitl_command
+    from bridge.sitl_json import DEFAULT_PORT, SitlPhysicsServer, bridge_command, sitl_command
 
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="canalnav sitl-physics: %(message)s")
@@ -57,10 +58,16 @@ def run(args) -> int:
         start = sitl_command(PARM_FILE, bound, args.host, scenario.geodetic_origin)
         print(f"boat FMU ({scenario.name}) serving SITL JSON physics on udp {host}:{bound}; "
               f"start SITL with: {start}", flush=True)
+        print(f"then drive it with: {bridge_command(args.scenario, scenario.geodetic_origin)}",
+              flush=True)
+        # SIGTERM (a supervisor, a script, `kill`) ends it as Ctrl-C does, with the summary
+        previous = signal.signal(signal.SIGTERM, lambda signum, frame: server.stop())
         try:
             server.serve(args.duration)
         except KeyboardInterrupt:
             pass
+        finally:
+            signal.signal(signal.SIGTERM, previous)
         out = server.output
         print(f"stopped: {server.frames} frames, {server.repeats} repeated, "
               f"{server.restarts} SITL restarts, {sum(server.rejected.values())} datagrams "

@@ -1,4 +1,5 @@
-"""`canalnav maneuvers`: simulate the paper's identification runs and write them as CSV logs."""
+"""`canalnav maneuvers`: the paper's identification runs as CSV logs: simulated from the model,
+or (`--connect`, options added by `bridge.commands.maneuvers_boat`) driven on the boat."""
 
 from __future__ import annotations
 
@@ -10,7 +11,8 @@ def register(sub) -> None:
         "plant, actuator rate limits 10 and 40 %%/s) at 10 Hz with seeded sensor noise: "
         "acceleration 31.0-50.6 %%, deceleration 50.6-20.0 %% (each held to steady state), a "
         "20 deg/50 %% zigzag at 42 %% (three overshoots) and a held-out 10 deg/30 %% zigzag "
-        "(header 'use: heldout'). Each log carries the true parameters in its header.",
+        "(header 'use: heldout'). Each log carries the true parameters in its header. With "
+        "--connect the same runs are driven on the boat over MAVLink instead (see below).",
     )
     p.add_argument("-o", "--out", required=True, metavar="DIR", help="directory for the logs")
     p.add_argument("--seed", type=int, default=1, help="noise seed (default 1)")
@@ -25,6 +27,19 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    from controller.errors import InputError
+
+    if getattr(args, "connect", None):
+        if args.params:
+            raise InputError("maneuvers: --params simulates a boat; with --connect the boat "
+                             "is real")
+        return args.connect_func(args)
+    if getattr(args, "scenario", None):
+        raise InputError("maneuvers: --scenario is for --connect (driving the runs on the boat)")
+    return simulate(args)
+
+
+def simulate(args) -> int:
     from controller.identification.maneuvers import PAPER_RUNS, QUICK_RUNS, generate, write_logs
     from controller.params import IDENTIFIED, BoatParams
 

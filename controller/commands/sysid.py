@@ -24,9 +24,27 @@ def register(sub) -> None:
         "'# maneuver:' header, else by content (|nS| <= 1 %% throughout: surge). Runs with "
         "'# use: heldout' (or given with --heldout) never enter the fit; they check it. The "
         "logs fix the parameters up to one common scale: m11 is fixed from the weight plus "
-        "Soding's added-mass estimate unless --fix names another surge parameter.",
+        "Soding's added-mass estimate unless --fix names another surge parameter. A LOG may be "
+        "an ArduPilot DataFlash log (.BIN) of the boat itself: state from the EKF's messages "
+        "(XKF1, else POS/GPS, ATT, IMU), commands from the servo outputs (RCOU with the "
+        "SERVOn_* in its PARM records), the runs found in it (steady throttle steps, zigzags) "
+        "or cut with --window.",
     )
-    p.add_argument("logs", nargs="+", metavar="LOG", help="CSV manoeuvre logs")
+    p.add_argument("logs", nargs="+", metavar="LOG",
+                   help="CSV manoeuvre logs, or ArduPilot DataFlash logs (.BIN)")
+    p.add_argument("--window", action="append", default=[], metavar="T0:T1",
+                   help="identify from this stretch of each .BIN log (seconds since boot, as "
+                   "the log's TimeUS; repeatable) instead of the runs found in it")
+    p.add_argument("--heldout-window", action="append", default=[], metavar="T0:T1",
+                   help="a stretch of each .BIN log used only to check the fit (repeatable)")
+    p.add_argument("--sample", type=float, default=0.1, metavar="S",
+                   help=".BIN logs are resampled every S seconds (default 0.1)")
+    p.add_argument("--actuator-rates", metavar="THR,STEER",
+                   help="for .BIN logs whose servo commands jump: the actuators follow them at "
+                   "most this fast (%%/s, e.g. 10,40)")
+    p.add_argument("--truth", metavar="TOML",
+                   help="compare with these parameters (a simulated boat's): true values and "
+                   "ratio errors in the table")
     p.add_argument("-o", "--out", metavar="TOML", help="write the identified parameters here")
     p.add_argument("--json", action="store_true", help="print JSON instead of the table")
     p.add_argument("--fix", type=_fix, action="append", default=[], metavar="NAME=VALUE",
@@ -77,9 +95,17 @@ def run(args) -> int:
     from controller.identification.sysid import format_table, identify, result_to_dict
 
     config = _config(args)
-    logs = [read_log(path) for path in args.logs]
+    logs = []
+    for path in args.logs:
+        logs += _read_any(path, args)
     logs += [dataclasses.replace(log, meta={**log.meta, "use": "heldout"})
-             for log in (read_log(path) for path in args.heldout)]
+             for path in args.heldout for log in _read_any(path, args)]
+    if args.truth:
+        from controller.identification.logs import with_truth_meta
+        from controller.params import BoatParams
+
+        truth = BoatParams.from_toml(args.truth)
+        logs = [dataclasses.replace(log, meta=with_truth_meta(log.meta, truth)) for log in logs]
     result = identify(logs, config)
     if args.json:
         print(json.dumps(result_to_dict(result), indent=2))
@@ -96,6 +122,46 @@ def run(args) -> int:
         if not args.json:
             print(f"\nwrote {args.out}")
     return 0
+
+
+def _read_any(path: str, args) -> list:
+    """A CSV manoeuvre log, or the runs of a DataFlash log (found, or cut by --window)."""
+    import sys
+
+    from controller.errors import InputError
+    from controller.identification.dataflash import is_dataflash, read_dataflash
+    from controller.identification.log_runs import Window, cut_windows, find_runs
+    from controller.identification.logs import read_log
+
+    if not (is_dataflash(path) or str(path).lower().endswith(".bin")):
+        return [read_log(path)]
+    rates = (0.0, 0.0)
+    if args.actuator_rates:
+        try:
+            rates = tuple(float(v) for v in args.actuator_rates.split(","))
+            if len(rates) != 2 or min(rates) < 0:
+                raise ValueError
+        except ValueError:
+            raise InputError(f"--actuator-rates {args.actuator_rates!r}: expected THR,STEER in "
+                             "%/s, e.g. 10,40") from None
+    flight = read_dataflash(path, sample_s=args.sample, actuator_rates=rates)
+    say = sys.stderr if args.json else sys.stdout
+    print(f"{path}: {flight.n_samples} samples over {flight.time_s[-1] - flight.time_s[0]:.0f} s; "
+          + "; ".join(f"{k} from {v}" for k, v in flight.sources.items()), file=say)
+    for note in flight.notes:
+        print(f"  note: {note}", file=say)
+    windows = [Window.parse(w) for w in args.window]
+    heldout = [Window.parse(w, "heldout") for w in args.heldout_window]
+    if windows:
+        runs = cut_windows(flight, windows + heldout)
+    else:
+        runs = find_runs(flight) + (cut_windows(flight, heldout) if heldout else [])
+    if not runs:
+        raise InputError(f"{path}: no identification run found (straight throttle steps, "
+                         "zigzags); select stretches with --window T0:T1")
+    for run in runs:
+        print(f"  {run.meta['use']}: {run.meta['description']}", file=say)
+    return runs
 
 
 def bench_run(args) -> int:

@@ -463,7 +463,8 @@ def _covariance(datas, free, est: BoatParams, scales, wa, x0s, f_d, active, stra
     p = ca.vertcat(*[scales[n] * theta[free.index(n)] if n in free else getattr(est, n)
                      for n in PARAM_NAMES])
     theta_hat = np.array([getattr(est, n) / scales[n] for n in free])
-    blocks, resid_rows, chan_rows, weight_rows, n_nuisance = [], [], [], [], []
+    blocks, resid_rows, chan_rows, weight_rows, series_rows, n_nuisance = [], [], [], [], [], []
+    n_series = 0
     for data, x0 in zip(datas, x0s):
         n = data.log.n_samples
         rows = [(k, np.flatnonzero(data.measured[:, c])) for k, c in enumerate(active)
@@ -484,6 +485,9 @@ def _covariance(datas, free, est: BoatParams, scales, wa, x0s, f_d, active, stra
                           - np.concatenate([data.values[r, active[k]] for k, r in rows]))
         chan_rows.append(np.concatenate([np.full(r.size, active[k]) for k, r in rows]))
         weight_rows.append(np.concatenate([np.full(r.size, wa[k]) for k, r in rows]))
+        series_rows.append(np.concatenate([np.full(r.size, n_series + j)
+                                           for j, (_, r) in enumerate(rows)]))
+        n_series += len(rows)
         blocks.append(np.asarray(jac))
         n_nuisance.append(len(free_x0))
     # J: shared parameter columns, then a block of initial-state columns per run
@@ -508,6 +512,7 @@ def _covariance(datas, free, est: BoatParams, scales, wa, x0s, f_d, active, stra
                                                else math.sqrt(var))
     A = J.T @ (wrow[:, None] * J)
     B = J.T @ ((wrow**2 * sigma2)[:, None] * J)
+    B += _autocorrelation_terms(J, resid * wrow, np.concatenate(series_rows))
     A_inv = _safe_inverse(A)
     S = np.array([scales[n] for n in free])
     cov = (A_inv @ B @ A_inv)[:n_free, :n_free] * np.outer(S, S)
@@ -515,6 +520,38 @@ def _covariance(datas, free, est: BoatParams, scales, wa, x0s, f_d, active, stra
     Att, Atz, Azz = A[:n_free, :n_free], A[:n_free, n_free:], A[n_free:, n_free:]
     info = Att - Atz @ _safe_inverse(Azz) @ Atz.T if Azz.size else Att
     return cov, info, rms
+
+
+def _bandwidth(e: np.ndarray) -> int:
+    """Lags over which a residual series is correlated: 0 for white residuals, else three
+    times the lag where its autocorrelation falls below 1/e (at most half the series)."""
+    n = len(e)
+    power = float(e @ e)
+    if n < 4 or power <= 0:
+        return 0
+    for lag in range(1, n // 2):
+        if float(e[lag:] @ e[:-lag]) / power < math.exp(-1.0):
+            return 0 if lag == 1 else min(n // 2, 3 * lag)
+    return n // 2
+
+
+def _autocorrelation_terms(J: np.ndarray, weighted_resid: np.ndarray,
+                           series: np.ndarray) -> np.ndarray:
+    """The cross-lag part of the scores' long-run covariance (Newey-West, Bartlett weights)
+    within each run's channel: an EKF's errors wander, and many correlated samples carry less
+    information than as many independent ones. Zero for white residuals."""
+    out = np.zeros((J.shape[1], J.shape[1]))
+    for sid in np.unique(series):
+        sel = np.flatnonzero(series == sid)  # in time order
+        e = weighted_resid[sel]
+        L = _bandwidth(e)
+        if L == 0:
+            continue
+        scores = e[:, None] * J[sel]
+        for lag in range(1, L + 1):
+            g = scores[lag:].T @ scores[:-lag]
+            out += (1.0 - lag / (L + 1.0)) * (g + g.T)
+    return out
 
 
 def _determinability(free: Sequence[str], est: BoatParams, cov: np.ndarray,
@@ -626,7 +663,7 @@ def identify(logs: Sequence[ManeuverLog], config: SysidConfig = SysidConfig()) -
             "'# maneuver: acceleration' header): the surge parameters "
             + ", ".join(surge_free) + " and the scale cannot be identified"
         )
-    stages, roles, se, det, dropped = [], {}, {}, {}, {}
+    stages, roles, se, det, dropped, failed = [], {}, {}, {}, {}, {}
     params = start
     for stage, stage_logs, free, weights in (
         ("surge", surge_logs, surge_free, config.surge_weights),
@@ -653,9 +690,13 @@ def identify(logs: Sequence[ManeuverLog], config: SysidConfig = SysidConfig()) -
         free = list(core)
         for n in extras:
             # forward selection: keep a term only if the data tell it from zero (> 2 SE)
-            trial = _solve_stage(stage, datas, free + [n], sol.params.replace(**{n: getattr(start, n)}),
-                                 scales, weights, config, step, sol.trajectories,
-                                 straight=straight)
+            try:
+                trial = _solve_stage(stage, datas, free + [n],
+                                     sol.params.replace(**{n: getattr(start, n)}), scales,
+                                     weights, config, step, sol.trajectories, straight=straight)
+            except SolverError as exc:  # a trial that fails leaves its term out, not the run
+                failed[n] = str(exc)
+                continue
             passes.append(trial.report)
             value = getattr(trial.params, n)
             sd = math.sqrt(max(trial.cov_theta[-1, -1], 0.0))
@@ -674,6 +715,9 @@ def identify(logs: Sequence[ManeuverLog], config: SysidConfig = SysidConfig()) -
             se[n] = sd
             det[n] = (f"not determined (trial fit {value:.4g} ± {sd:.3g}, "
                       f"< {SELECT_T:g} SE): kept at 0")
+        for n, why in failed.items():
+            roles[n] = "left out"
+            det[n] = f"not determined (the trial fit with it failed: {why}): kept at 0"
 
     truth = _common_truth([*surge_logs, *sway_logs])
     t_h = time.perf_counter()

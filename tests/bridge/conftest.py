@@ -1,8 +1,8 @@
 """A minimal scripted fake autopilot for the bridge's link and loop tests (not AutopilotSim).
 
 It listens on a free loopback UDP port, runs as a VirtualClock peer in the test's thread,
-answers heartbeats, PARAM_REQUEST_READ from a dict, COMMAND_LONG with COMMAND_ACK and
-TIMESYNC, streams ATTITUDE / LOCAL_POSITION_NED / GLOBAL_POSITION_INT / EKF_STATUS_REPORT at
+answers heartbeats, PARAM_REQUEST_READ from a dict, COMMAND_LONG with COMMAND_ACK (and
+REQUEST_MESSAGE for GPS_GLOBAL_ORIGIN), TIMESYNC, streams ATTITUDE / LOCAL_POSITION_NED / GLOBAL_POSITION_INT / EKF_STATUS_REPORT at
 the rates asked, moves its boat with constant body velocities, and records every message it
 receives with the virtual time, so tests can decode what the bridge sent and in what order.
 """
@@ -17,7 +17,7 @@ import pytest
 import bridge.link  # noqa: F401 - sets MAVLink 2 before any connection is made
 from bridge.ardupilot import DEFAULT_PARAMS, MODE_NAMES, MODES
 from bridge.clock import VirtualClock
-from bridge.ekf_state import ned_to_geodetic
+from controller.geodetic import ned_to_geodetic
 from bridge.mavlink_plant import free_udp_port
 from pymavlink import mavutil
 
@@ -45,6 +45,7 @@ class FakeAutopilot:
         self.vehicle_type = vehicle_type
         self.state = np.array(state, float)
         self.origin = geodetic_origin
+        self.ekf_origin = geodetic_origin  # what GPS_GLOBAL_ORIGIN says (the local frame's 0)
         self.ekf_flags = ekf_flags
         self.intervals: dict[int, float] = {}  # message id -> period (s)
         self.due: dict[int, float] = {}
@@ -117,7 +118,8 @@ class FakeAutopilot:
                 self.mav.param_value_send(name.encode(), float(self.params[name]),
                                           m.MAV_PARAM_TYPE_REAL32, len(self.params), 0)
         elif kind == "TIMESYNC" and msg.tc1 == 0 and self.answer_timesync and not self.mute:
-            self.mav.timesync_send(int(self.clock.now() * 1e9) + 1, msg.ts1)
+            # as ArduPilot: its time since boot, the clock of time_boot_ms
+            self.mav.timesync_send(int((self.clock.now() - self.boot_t) * 1e9) + 1, msg.ts1)
         elif kind == "COMMAND_LONG":
             result = self.ack_results.get(msg.command, m.MAV_RESULT_ACCEPTED)
             if result == m.MAV_RESULT_ACCEPTED:
@@ -127,6 +129,11 @@ class FakeAutopilot:
                     self.mode = int(msg.param2)
                 elif msg.command == m.MAV_CMD_COMPONENT_ARM_DISARM:
                     self.armed = msg.param1 == 1
+                elif (msg.command == m.MAV_CMD_REQUEST_MESSAGE and int(msg.param1) == 49
+                      and not self.mute and self.ekf_origin is not None):
+                    lat, lon, alt = self.ekf_origin
+                    self.mav.gps_global_origin_send(int(round(lat * 1e7)), int(round(lon * 1e7)),
+                                                    int(round(alt * 1000)), 0)
             if not self.mute:
                 self.mav.command_ack_send(msg.command, result, 0, 0, msg.get_srcSystem(),
                                           msg.get_srcComponent())

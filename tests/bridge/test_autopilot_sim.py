@@ -49,6 +49,7 @@ class Rig:
         self.port = free_udp_port()
         self.clock = VirtualClock(0.01)
         kwargs.setdefault("ekf_delay_s", 1.0)
+        kwargs.setdefault("init_s", 0.0)  # running at once (start-up has its own test)
         self.sim = AutopilotSim(scenario, f"udpin:127.0.0.1:{self.port}", self.clock,
                                 work_dir=tmp_path, **kwargs)
         self.clock.add_peer(self.sim.pump)
@@ -141,10 +142,35 @@ def test_heartbeat_says_boat_ardupilot_manual_disarmed_mavlink2(make_rig):
     assert hb.type == 11 and hb.autopilot == 3  # MAV_TYPE_SURFACE_BOAT, ARDUPILOTMEGA
     assert hb.base_mode & CUSTOM and not hb.base_mode & SAFETY_ARMED
     assert hb.custom_mode == ardupilot.MODES["MANUAL"]
-    assert hb.system_status == 3  # MAV_STATE_STANDBY
+    assert hb.system_status == 4  # MAV_STATE_ACTIVE: Rover says STANDBY only in HOLD
     assert hb.get_msgbuf()[0] == 253  # MAVLink 2 frame
     beats = [m for m in rig.run(3.0) if m.get_type() == "HEARTBEAT"]
     assert 2 <= len(beats) <= 4  # 1 Hz
+
+
+def test_start_up_like_rover(make_rig):
+    """INITIALISING and CALIBRATING for init_s, dead zones 0 until start-up sets them to 30
+    (without a PARAM_VALUE), arming and modes refused meanwhile; a stored value stays."""
+    rig = make_rig(init_s=2.0, params={"RC3_DZ": 45})
+    hb = rig.wait("HEARTBEAT")
+    assert hb.custom_mode == ardupilot.MODES["INITIALISING"] and hb.system_status == 2
+    assert rig.param("RC1_DZ").param_value == 0  # not yet Rover's 30 us
+    assert rig.param("RC3_DZ").param_value == 45  # stored: start-up leaves it alone
+    assert rig.command(CMD_ARM, 1).result == 1  # MAV_RESULT_TEMPORARILY_REJECTED
+    assert rig.command(CMD_DO_SET_MODE, CUSTOM, ardupilot.MODES["HOLD"]).result == 1
+    rig.client.inbox.clear()
+    hb = rig.wait("HEARTBEAT", lambda m: m.custom_mode == ardupilot.MODES["MANUAL"], timeout_s=3.0)
+    assert hb.system_status == 4 and rig.sim.initialised
+    assert not any(m.get_type() == "PARAM_VALUE" for m in rig.client.inbox)  # set silently
+    assert rig.param("RC1_DZ").param_value == 30
+    assert rig.command(CMD_ARM, 1, ardupilot.FORCE_ARM_MAGIC).result == ACCEPTED
+    # a change from anyone is sent to all
+    rig.sim.set_param("RC1_TRIM", 1490)
+    assert rig.wait("PARAM_VALUE", lambda m: m.param_id == "RC1_TRIM").param_value == 1490
+    # a reboot starts up again: the dead zone reads 0 until it is over
+    rig.command(CMD_ARM, 0)
+    rig.sim.restart()
+    assert rig.param("RC1_DZ").param_value == 0 and not rig.sim.initialised
 
 
 def test_parameters_read_by_name_and_index_list_and_set(make_rig):
@@ -307,7 +333,8 @@ def test_override_rules(make_rig):
     assert rig.sim.outputs[0] > 0 and rig.sim.outputs[1] < 0
     rig.override(ch3=1700)  # ch1 left as it is (65535)
     rig.run(0.2)
-    assert rig.sim.outputs[0] == pytest.approx(100 * 170 / 370) and rig.sim.outputs[1] < 0
+    # 170 us of the 370 above the dead zone is 45.9 %: Rover reads whole percent, truncated
+    assert rig.sim.outputs[0] == 45.0 and rig.sim.outputs[1] < 0
     rig.override(ch1=0)  # release the steering: back to the receiver's trim
     rig.run(0.2)
     assert rig.sim.outputs[1] == 0.0 and rig.sim.outputs[0] > 0
@@ -407,7 +434,7 @@ def test_restart_resets_boot_time_and_state_not_the_boat(make_rig):
     assert att.time_boot_ms > 1900
     x_before = rig.sim.true_state
     rig.sim.restart()
-    assert not rig.sim.armed and rig.sim.mode == ardupilot.MODES["MANUAL"]
+    assert not rig.sim.armed and rig.sim.mode == ardupilot.MODES["INITIALISING"]  # starts up
     assert rig.sim.outputs == (0.0, 0.0)
     got = rig.run(0.5)
     assert [m.time_boot_ms for m in got if m.get_type() == "ATTITUDE"][0] < 100
@@ -440,11 +467,19 @@ def test_same_seed_same_messages(make_rig):
 
 def test_state_messages_match_the_truth(make_rig):
     rig = make_rig(ekf_delay_s=0.5)
+    org = rig.wait("GPS_GLOBAL_ORIGIN", timeout_s=1.0)  # sent when the EKF sets its origin
     lp = rig.wait("LOCAL_POSITION_NED", timeout_s=1.0)
+    x_lp = rig.sim.true_state
     gp = rig.wait("GLOBAL_POSITION_INT", timeout_s=1.0)
     att = rig.wait("ATTITUDE", timeout_s=1.0)
     x = rig.sim.true_state
-    assert abs(lp.x - x[0]) < 1.0 and abs(lp.y - x[1]) < 1.0 and abs(lp.vx - x[3]) < 0.3
+    # the EKF origin is where the boat was at the fix (0.5 s at 1 m/s from (0, 2)), and
+    # LOCAL_POSITION_NED is measured from it
+    n0, e0 = rig.sim.ekf_origin_ne
+    assert n0 == pytest.approx(0.5, abs=0.7) and e0 == pytest.approx(2.0, abs=0.7)
+    assert (org.latitude, org.longitude) == tuple(round(v * 1e7) for v in rig.sim.ekf_origin[:2])
+    assert abs(lp.x - (x_lp[0] - n0)) < 0.3 and abs(lp.y - (x_lp[1] - e0)) < 0.3
+    assert abs(lp.vx - x[3]) < 0.3
     lat0, lon0, alt0 = ardupilot.SITL_DEFAULT_HOME  # straight.toml has no origin
     north = math.radians(gp.lat * 1e-7 - lat0) * 6378137.0
     assert abs(north - x[0]) < 1.0 and gp.alt == round(alt0 * 1000) and gp.relative_alt == 0
@@ -469,3 +504,54 @@ def test_cli_bad_input_is_one_line(tmp_path, capsys):
     assert main(args + [str(STRAIGHT), "--signing-key", str(tmp_path / "k")]) == 2
     err = capsys.readouterr().err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 3
+
+
+# -- the onboard DataFlash log ----------------------------------------------------------------
+def _read_bin(path):
+    from pymavlink import DFReader
+
+    log = DFReader.DFReader_binary(str(path))
+    out = {}
+    while (m := log.recv_msg()) is not None:
+        out.setdefault(m.get_type(), []).append(m)
+    log.close()
+    return out
+
+
+def test_dataflash_log_as_ardupilot_writes_it(make_rig, tmp_path):
+    from controller.pwm import CommandChannels
+
+    rig = make_rig(init_s=1.0, ekf_delay_s=2.0, log_dir=tmp_path / "logs")
+    rig.run(2.5)
+    rig.arm()
+    for _ in range(10):
+        rig.override(ch3=1700, ch1=1400)  # 45 % ahead, steering below trim: nS > 0, port
+        rig.run(0.3)
+    path = rig.sim.log_paths[0]
+    assert path.name == "00000001.BIN" and path.read_bytes()[:3] == b"\xa3\x95\x80"  # FMT first
+    got = _read_bin(path)  # while it is being written: flushed as it goes
+    assert {"FMT", "UNIT", "MULT", "FMTU", "PARM", "MODE", "ARM", "MSG", "ORGN", "XKF1", "ATT",
+            "POS", "GPS", "IMU", "RCIN", "RCOU"} <= set(got)
+    dz = [(m.TimeUS, m.Value) for m in got["PARM"] if m.Name == "RC1_DZ"]
+    assert dz[0] == (0, 0.0) and dz[1][1] == 30.0 and dz[1][0] >= 1_000_000  # set by start-up
+    assert [m.Mode for m in got["MODE"]][:2] == [16, 0]  # INITIALISING, then MANUAL
+    assert got["ARM"][0].ArmState == 1
+    assert got["ORGN"][0].Type == 0 and got["ORGN"][0].TimeUS >= 2_000_000
+    xkf = got["XKF1"]
+    rate = (len(xkf) - 1) / ((xkf[-1].TimeUS - xkf[0].TimeUS) * 1e-6)
+    assert 24 <= rate <= 26 and xkf[0].TimeUS >= 2_000_000  # from the fix on, 25 Hz
+    assert abs(xkf[0].PN) < 0.1 and xkf[-1].PN > 2.0  # metres from the EKF origin
+    rcou = got["RCOU"]
+    assert 49 <= (len(rcou) - 1) / ((rcou[-1].TimeUS - rcou[0].TimeUS) * 1e-6) <= 51
+    params = {m.Name: m.Value for m in got["PARM"]}
+    servos = CommandChannels.from_servo_params(params)
+    nT, nS = servos.to_commands({1: rcou[-1].C1, 3: rcou[-1].C3})
+    assert (nT, nS) == pytest.approx(rig.sim.outputs, abs=0.13)
+    assert nT == pytest.approx(45.0, abs=0.2) and nS == pytest.approx(100 * 70 / 370, abs=0.3)
+    assert rcou[-1].C2 == 0  # a disabled output
+    assert got["RCIN"][-1].C3 == 1700 and got["RCIN"][-1].C1 == 1400
+    assert got["IMU"][-1].GyrZ < 0  # turning to port
+    rig.sim.restart()  # a reboot starts a new log
+    rig.run(0.2)
+    assert [p.name for p in rig.sim.log_paths] == ["00000001.BIN", "00000002.BIN"]
+    assert (tmp_path / "logs" / "LASTLOG.TXT").read_text().strip() == "2"

@@ -8,8 +8,9 @@ from types import SimpleNamespace as Msg
 import numpy as np
 import pytest
 
-from bridge.ekf_state import (EkfState, body_velocity, geodetic_to_ned, horizontal_position_ok,
-                              ned_to_geodetic, predict, predict_vector, state_from_global,
+from controller.geodetic import geodetic_to_ned, ned_to_geodetic
+from bridge.ekf_state import (EkfState, body_velocity, horizontal_position_ok,
+                              predict, predict_vector, state_from_global,
                               state_from_local)
 
 

@@ -16,7 +16,7 @@ import pytest
 
 from bridge.ardupilot import DEFAULT_PARAMS
 from bridge.link import AutopilotLink, LinkError, parse_url
-from bridge.rc_mapping import RcMapping
+from controller.pwm import CommandChannels
 from controller.errors import InputError
 from pymavlink import mavutil
 
@@ -142,7 +142,7 @@ def last_override(ap, link):
 def test_pwm_through_send_commands_with_non_default_calibration_and_mapping(make_autopilot, vclock):
     ap = make_autopilot()
     link = connect(ap, vclock)
-    link.rc_mapping = RcMapping.from_params(CALIBRATED)
+    link.rc_mapping = CommandChannels.from_rc_params(CALIBRATED)
     sent = link.send_commands(50.0, 30.0)
     chans = last_override(ap, link)
     # steering ch2: nS = +30 (port) is below trim: 1450 - 20 - 0.3 * (1430 - 1000) = 1301
@@ -157,7 +157,7 @@ def test_pwm_through_send_commands_with_non_default_calibration_and_mapping(make
 def test_steering_sense_both_ways(make_autopilot, vclock):
     ap = make_autopilot()
     link = connect(ap, vclock)
-    link.rc_mapping = RcMapping.from_params(DEFAULT_PARAMS)  # steering 1, throttle 3, DZ 30
+    link.rc_mapping = CommandChannels.from_rc_params(DEFAULT_PARAMS)  # steering 1, throttle 3, DZ 30
     link.send_commands(0.0, 40.0)  # port
     port = last_override(ap, link)
     link.send_commands(0.0, -40.0)  # starboard
@@ -175,14 +175,14 @@ def test_steering_sense_both_ways(make_autopilot, vclock):
 def test_neutral_and_release(make_autopilot, vclock):
     ap = make_autopilot()
     link = connect(ap, vclock)
-    link.rc_mapping = RcMapping.from_params(CALIBRATED)
+    link.rc_mapping = CommandChannels.from_rc_params(CALIBRATED)
     link.send_neutral()
     neutral = last_override(ap, link)
     assert (neutral[1], neutral[3]) == (1450, 1500)
     link.release()
     assert last_override(ap, link) == [0] * 8 + [0] * 10
     # a channel above 8 is released with UINT16_MAX - 1 (0 would mean "ignore" there)
-    link.rc_mapping = RcMapping.from_params({**CALIBRATED, "RCMAP_THROTTLE": 9})
+    link.rc_mapping = CommandChannels.from_rc_params({**CALIBRATED, "RCMAP_THROTTLE": 9})
     link.send_commands(20.0, 0.0)
     chans = last_override(ap, link)
     assert chans[8] == 1500 + 80 and chans[3] == 65535
@@ -351,7 +351,7 @@ def test_tlog_holds_sent_and_received_messages(make_autopilot, vclock, tmp_path)
     ap = make_autopilot()
     path = tmp_path / "link.tlog"
     link = connect(ap, vclock, tlog_path=path)
-    link.rc_mapping = RcMapping.from_params({})
+    link.rc_mapping = CommandChannels.from_rc_params({})
     link.send_commands(10, 0)
     link.request_streams(20)
     link.wait_until(lambda: False, 0.3)

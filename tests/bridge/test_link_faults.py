@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
+from bridge.ardupilot import SITL_DEFAULT_HOME
 from bridge.autopilot_sim import AutopilotSim
 from bridge.clock import VirtualClock
 from bridge.lidar_source import SimLidarSource
@@ -64,7 +65,8 @@ class Rig:
         self.loop = OnboardLoop(
             self.link, scenario, NmpcController(scenario), SimLidarSource(scenario, seed=4),
             BridgeOptions(mode="MANUAL", arm=True, duration_s=duration_s, resume=resume,
-                          ekf_timeout_s=30.0, stale_s=stale_s),
+                          ekf_timeout_s=30.0, stale_s=stale_s,
+                          origin=SITL_DEFAULT_HOME),  # where the simulator puts straight.toml
             console=self.console, log=self.log)
         self.tmp_path = tmp_path
 

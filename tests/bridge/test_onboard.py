@@ -69,7 +69,8 @@ class NoLidar:
         return None
 
 
-OPTIONS = BridgeOptions(heartbeat_timeout_s=5.0, ekf_timeout_s=5.0)
+OPTIONS = BridgeOptions(heartbeat_timeout_s=5.0, ekf_timeout_s=5.0,
+                        origin=(52.0, 4.0, 0.0))  # the fake autopilot's (straight.toml has none)
 
 
 def run_loop(ap, clock, scenario, controller, log_dir=None, lidar=None, at=None, **options):
@@ -133,8 +134,10 @@ def test_runs_to_the_goal_and_exits_0(make_autopilot, vclock, scenario, tmp_path
     ctrl = StubController(command=(30.0, 10.0))
     result, console = run_loop(ap, vclock, scenario, ctrl, log_dir=tmp_path)
     assert result.exit_code == EXIT_GOAL and result.reached_goal and result.reason == "reached the goal"
-    # 25 m at 4 m/s, 10 Hz
-    assert 60 <= result.steps <= 66
+    # from where the loop started to 25 m (the goal's radius short of it) at 4 m/s, 10 Hz
+    rows = read_steps(tmp_path)
+    x0 = float(next(r for r in rows if r["x_m"])["x_m"])
+    assert result.steps == pytest.approx((25.0 - x0) / 0.4, abs=3)
     # commands at the autopilot: nT 30 on ch3 above trim, nS 10 (port) on ch1 below trim
     drive = [o for o in ap.overrides() if o[2] not in (0, 1500)]
     assert drive[0][:8] == [1433, 65535, 1641, 65535, 65535, 65535, 65535, 65535]
@@ -340,7 +343,15 @@ def test_nearest_segment():
 
 
 def test_cli_bad_input_is_one_clear_line(capsys, tmp_path):
-    base = ["bridge", "--scenario", str(STRAIGHT)]
+    assert main(["bridge", "--scenario", str(STRAIGHT), "--connect", "udpout:127.0.0.1:9"]) == 2
+    err = capsys.readouterr().err
+    assert "no geodetic origin: the scenario" in err and "[origin] lat_deg" in err
+    assert "--origin=-35.363261,149.16523,584" in err and len(err.strip().splitlines()) == 1
+    for bad in ("52", "52,x", "91,4", "52,4,0,1"):
+        assert main(["bridge", "--scenario", str(STRAIGHT), "--connect", "udpout:127.0.0.1:9",
+                     "--origin", bad]) == 2
+        assert f"--origin {bad!r}" in capsys.readouterr().err
+    base = ["bridge", "--scenario", str(STRAIGHT), "--origin", "52.0,4.0"]
     assert main(base + ["--connect", "udpin:nonsense"]) == 2
     assert "cannot open the MAVLink connection 'udpin:nonsense'" in capsys.readouterr().err
     assert main(base + ["--connect", "udpout:127.0.0.1:9", "--signing-key",
@@ -352,5 +363,25 @@ def test_cli_bad_input_is_one_clear_line(capsys, tmp_path):
     assert "--mode FLY: not a Rover mode" in capsys.readouterr().err
     assert main(base + ["--connect", "udpout:127.0.0.1:9", "--duration", "-1"]) == 2
     assert "--duration must be a positive number" in capsys.readouterr().err
-    assert main(["bridge", "--connect", "udpout:127.0.0.1:9", "--scenario", "nope.toml"]) == 2
+    assert main(["bridge", "--connect", "udpout:127.0.0.1:9", "--scenario", "nope.toml",
+                 "--origin", "52,4"]) == 2
     assert "no such scenario file" in capsys.readouterr().err
+
+
+def test_frames_that_disagree_are_refused_and_a_missing_origin_is_a_note(make_autopilot, vclock,
+                                                                        scenario):
+    from controller.geodetic import ned_to_geodetic
+
+    ap = make_autopilot()
+    lat, lon = ned_to_geodetic(10.0, 0.0, ap.origin)
+    ap.ekf_origin = (lat, lon, 0.0)  # GPS_GLOBAL_ORIGIN 10 m off the local frame's zero
+    result, console = run_loop(ap, vclock, scenario, StubController())
+    assert result.exit_code == EXIT_REFUSED
+    assert re.search(r"LOCAL_POSITION_NED from the EKF origin .* 10\.\d m apart; the "
+                     r"autopilot's frames disagree", console), console
+    assert ap.overrides() == []
+    ap2 = make_autopilot(state=(0.0, 0.0, 0.0, 5.0, 0.0, 0.0))
+    ap2.ekf_origin = None  # never answers GPS_GLOBAL_ORIGIN
+    result, console = run_loop(ap2, vclock, scenario, StubController())
+    assert result.exit_code == EXIT_GOAL
+    assert "note: no GPS_GLOBAL_ORIGIN within 5 s" in console

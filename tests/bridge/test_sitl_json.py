@@ -445,8 +445,51 @@ def test_command_line(tmp_path, capsys):
     assert main(["sitl-physics", "--scenario", str(path), "--port", "0",
                  "--duration", "0.2"]) == 0
     out = capsys.readouterr()
-    line = out.out.strip()
-    assert "\n" not in line and "udp 127.0.0.1:" in line
+    line, then = out.out.strip().splitlines()
+    assert "udp 127.0.0.1:" in line
     assert "sim_vehicle.py -v Rover -f motorboat --model JSON:127.0.0.1" in line
     assert "sitl_boat.parm" in line and "--custom-location=52.00000000,4.50000000,0,0" in line
+    assert then == (f"then drive it with: canalnav bridge --connect udp:127.0.0.1:14550 "
+                    f"--scenario {path} --mode MANUAL --arm")  # the scenario has an [origin]
     assert "stopped: 0 frames" in out.err
+    # without [origin]: SITL's default home, explicitly, and the bridge's --origin to match
+    path.write_text(SCENARIO.format(u=0.0, cn=0.0, ce=0.0))
+    assert main(["sitl-physics", "--scenario", str(path), "--port", "0",
+                 "--duration", "0.1"]) == 0
+    line, then = capsys.readouterr().out.strip().splitlines()
+    assert "--custom-location=-35.36326100,149.16523000,584,0" in line
+    assert "--origin=-35.363261,149.16523,584 --mode MANUAL --arm" in then
+
+
+def test_sigterm_stops_with_the_summary(tmp_path):
+    """A supervisor or a script stops sitl-physics with SIGTERM: it prints its summary and
+    exits 0, as on Ctrl-C."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    path = tmp_path / "s.toml"
+    path.write_text(SCENARIO.format(u=1.0, cn=0.0, ce=0.0))
+    proc = subprocess.Popen([sys.executable, "-m", "bridge.main", "sitl-physics", "--scenario",
+                             str(path), "--port", "0"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        first = proc.stdout.readline()  # serving: the FMU is built and the port bound
+        assert "serving SITL JSON physics" in first, first
+        port = int(re.search(r"udp 127\.0\.0\.1:(\d+)", first).group(1))
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sitl:
+            sitl.settimeout(5.0)
+            for k in range(3):  # three frames, so the summary has something to say
+                sitl.sendto(encode_servo_packet(ServoPacket(50, k, (1500,) * 16)),
+                            ("127.0.0.1", port))
+                sitl.recvfrom(65536)
+        time.sleep(0.2)
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 0, (proc.returncode, err)
+    assert "stopped: 2 frames, 0 repeated" in err and "boat at t = 0.04 s" in err, err
