@@ -15,7 +15,7 @@ import pytest
 
 from controller.errors import InputError
 from controller.geometry import (distance_to_polylines, point_segment_distance, points_in_polygon,
-                                 segments_to_endpoints)
+                                 segments_to_endpoints, wrap_angle)
 from controller.perception.detection import crop_mask, detect_segments
 from controller.perception.tracking import Track, TrackerConfig, VesselTracker
 from scenarios.sensors.lidar import OBSTACLE, LidarSimulator
@@ -366,3 +366,182 @@ def test_static_segments_drop_the_moving_hull_and_keep_the_walls(oncoming, barge
               f"on the walls {on_wall}, kept {wall_kept}")
         assert on_hull > 0 and hull_kept <= 0.05 * on_hull
         assert on_wall > 0 and wall_kept == on_wall
+
+
+# -- hand-made clouds: the tracker's rules one by one ------------------------------------
+def box_cloud(ring, pose, spacing=0.1, height=0.5):
+    """Points every `spacing` m along the edges of an inertial outline, in the body frame of
+    a boat at `pose` (z down): a vessel the sensor sees all round (no occlusion)."""
+    ring = np.asarray(ring, float)
+    pts = []
+    for a, b in zip(ring, np.roll(ring, -1, axis=0)):
+        n = max(int(np.hypot(*(b - a)) / spacing), 1)
+        pts.append(a + np.linspace(0.0, 1.0, n, endpoint=False)[:, None] * (b - a))
+    xy = np.concatenate(pts) - pose[:2]
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    body = np.column_stack([c * xy[:, 0] + s * xy[:, 1], -s * xy[:, 0] + c * xy[:, 1]])
+    return np.column_stack([body, np.full(len(body), -height)])
+
+
+def feed(tracker, vessel, times, pose=(0.0, 0.0, 0.0)):
+    out = None
+    for t in times:
+        out = tracker.update(t, box_cloud(vessel.outline(t), pose), pose, None)
+    return out
+
+
+AWAY = Vessel("away", (30.0, 5.0), 0.0, 3.0, 8.0, 2.5)  # 30 m ahead, making 3 m/s away
+
+
+def test_confirmed_after_three_hits_dropped_after_misses():
+    tracker = VesselTracker()
+    out = feed(tracker, AWAY, [0.0, 0.1])
+    assert out.tracks == () and out.tentative == 1
+    out = feed(tracker, AWAY, [0.2])
+    assert len(out.tracks) == 1 and out.tracks[0].confirmed and out.tentative == 0
+    first = out.tracks[0]
+    assert first.hits == 3 and first.confirmed_s == 0.2 and first.first_seen_s == 0.0
+    empty = np.array([[-40.0, 30.0, -0.5]])  # a scan with nothing of the vessel in it
+    cfg = tracker.config
+    for k in range(cfg.max_misses - 1):
+        out = tracker.update(0.3 + 0.1 * k, empty, (0.0, 0.0, 0.0), None)
+    assert len(out.tracks) == 1 and out.tracks[0].misses == cfg.max_misses - 1
+    out = tracker.update(0.3 + 0.1 * cfg.max_misses, empty, (0.0, 0.0, 0.0), None)
+    assert out.tracks == () and tracker.tracks == ()
+
+
+def test_a_few_scans_never_confirm():
+    tracker = VesselTracker()
+    feed(tracker, AWAY, [0.0, 0.1])
+    out = None
+    for k in range(5):
+        out = tracker.update(0.2 + 0.1 * k, np.array([[-40.0, 30.0, -0.5]]), (0, 0, 0), None)
+    assert out.tracks == () and tracker.tracks == ()
+
+
+def test_moving_track_follows_and_leaves_the_view():
+    tracker = VesselTracker()
+    times = np.arange(0.0, 3.0, 0.1)
+    out = feed(tracker, AWAY, times)
+    (tr,) = out.tracks
+    assert tr.moving and abs(tr.velocity[0] - 3.0) < 0.2 and abs(tr.velocity[1]) < 0.1
+    assert np.hypot(*(tr.position - AWAY.position(times[-1]))) < 0.3
+    assert abs(tr.length_m - AWAY.length_m) < 0.3 and abs(tr.width_m - AWAY.width_m) < 0.3
+    assert abs(wrap_angle(tr.heading_rad - AWAY.course_rad)) < math.radians(3.0)
+    # Beyond the crop's 60 m the vessel is not seen; when its outline has left the view,
+    # its track is gone.
+    t = times[-1]
+    while AWAY.position(t)[0] - 0.5 * AWAY.length_m < TrackerConfig().detection.range_m + 5.0:
+        t += 0.1
+        out = tracker.update(t, box_cloud(AWAY.outline(t), (0.0, 0.0, 0.0)), (0.0, 0.0, 0.0), None)
+    assert out.tracks == () and tracker.tracks == ()
+
+
+def test_static_box_is_tracked_and_not_moving():
+    still = Vessel("still", (25.0, -6.0), 0.3, 0.0, 6.0, 2.0)
+    tracker = VesselTracker()
+    out = feed(tracker, still, np.arange(0.0, 4.0, 0.1))
+    (tr,) = out.tracks
+    assert not tr.moving and tr.speed_mps < 0.05
+    assert np.hypot(*(tr.position - still.position(0.0))) < 0.2
+
+
+def test_same_scans_same_tracks():
+    """Two trackers fed the same scans agree to the last bit (no randomness inside)."""
+    sim = LidarSimulator(canal(), seed=11)
+    scans = []
+    for k in range(40):
+        t = k / RATE_HZ
+        pose = (t, 0.0, 0.0)
+        pts = sim.scan(pose, 1.0, time_s=t, extra_obstacles=[
+            Obstacle(KAYAK.outline(t), z_top_m=KAYAK.height_m)])
+        scans.append((t, pts, pose, detect_segments(pts, pose)))
+    runs = []
+    for _ in range(2):
+        tracker = VesselTracker()
+        runs.append([[tr.as_record() for tr in tracker.update(*s).tracks] for s in scans])
+    assert runs[0] == runs[1] and any(runs[0])
+
+
+def _coasting_tracker():
+    tracker = VesselTracker()
+    feed(tracker, AWAY, np.arange(0.0, 2.0, 0.1))
+    (tr,) = tracker.update(2.0, box_cloud(AWAY.outline(2.0), (0, 0, 0)), (0, 0, 0), None).tracks
+    return tracker, tr
+
+
+@pytest.mark.parametrize("points, pose, status", [
+    (None, (0.0, 0.0, 0.0), "no_scan"),
+    (np.zeros((0, 3)), (0.0, 0.0, 0.0), "no_scan"),
+    (np.full((50, 3), np.nan), (0.0, 0.0, 0.0), "bad_points"),
+    (np.zeros((10, 2)), (0.0, 0.0, 0.0), "bad_points"),
+    (np.array([["a", "b", "c"]]), (0.0, 0.0, 0.0), "bad_points"),
+    ("box", (np.nan, 0.0, 0.0), "bad_pose"),
+    ("box", (0.0, 0.0), "bad_pose"),
+    ("box", None, "bad_pose"),
+])
+def test_bad_scans_are_counted_and_the_tracks_predicted(points, pose, status):
+    tracker, before = _coasting_tracker()
+    if isinstance(points, str):
+        points = box_cloud(AWAY.outline(2.1), (0, 0, 0))
+    out = tracker.update(2.1, points, pose, None)
+    assert out.status == status and tracker.counts[status] == 1
+    (tr,) = out.tracks  # predicted 0.1 s on, not updated
+    assert np.allclose(tr.position, before.position + 0.1 * before.velocity)
+    assert tr.hits == before.hits and tr.misses == before.misses
+
+
+def test_nan_rows_are_dropped_and_the_rest_used():
+    tracker, before = _coasting_tracker()
+    cloud = box_cloud(AWAY.outline(2.1), (0, 0, 0))
+    cloud[::7] = np.nan
+    out = tracker.update(2.1, cloud, (0, 0, 0), None)
+    assert out.status == "ok" and tracker.counts["dropped_points"] == 1
+    assert out.tracks[0].hits == before.hits + 1
+
+
+@pytest.mark.parametrize("time_s", [np.nan, None, "soon", 1.9])
+def test_bad_time_changes_nothing(time_s):
+    tracker, before = _coasting_tracker()
+    out = tracker.update(time_s, box_cloud(AWAY.outline(2.1), (0, 0, 0)), (0, 0, 0), None)
+    assert out.status == "bad_time" and tracker.counts["bad_time"] == 1
+    (tr,) = out.tracks
+    assert np.array_equal(tr.position, before.position) and tr.hits == before.hits
+
+
+@pytest.mark.parametrize("segments", [np.zeros((3, 3)), "walls", [[1.0, 2.0, np.nan, 4.0]]])
+def test_odd_segments_are_ignored(segments):
+    tracker, before = _coasting_tracker()
+    out = tracker.update(2.1, box_cloud(AWAY.outline(2.1), (0, 0, 0)), (0, 0, 0), segments)
+    assert out.status == "ok" and out.tracks[0].hits == before.hits + 1
+    assert out.static_segments.shape == (0, 4)
+
+
+def test_track_from_truth_and_log_records():
+    import json
+
+    tr = Track.from_truth(7, (10.0, -2.0), (0.0, 1.5), math.pi / 2, 12.0, 3.5, time_s=4.0)
+    assert tr.id == 7 and tr.moving and tr.confirmed and tr.speed_mps == 1.5
+    assert tr.covariance.shape == (4, 4) and np.all(np.diag(tr.covariance) < 0.01)
+    assert not Track.from_truth(8, (0, 0), (0.1, 0.0), 0.0, 3.0, 1.0).moving
+    with pytest.raises(ValueError):
+        tr.position[0] = 1.0  # snapshots are read-only
+    record = json.loads(json.dumps(tr.as_record()))
+    assert record["id"] == 7 and record["vy"] == 1.5 and record["moving"] is True
+    tentative = VesselTracker()
+    feed(tentative, AWAY, [0.0])
+    assert json.loads(json.dumps(tentative.tracks[0].as_record()))["confirmed_s"] is None
+
+
+@pytest.mark.parametrize("field, value", [
+    ("max_vessel_length_m", 0.0), ("cell_m", -1.0), ("accel_sigma_mps2", math.nan),
+    ("confirm_hits", 0), ("confirm_hits", 2.5), ("moving_hits", True), ("gate_chi2", "9"),
+    ("detection", None)])
+def test_bad_config_is_a_clear_error(field, value):
+    with pytest.raises(InputError, match=field if field != "detection" else "detection"):
+        TrackerConfig(**{field: value})
+
+
+def test_confirm_hits_within_the_window():
+    with pytest.raises(InputError, match="confirm_window"):
+        TrackerConfig(confirm_hits=6, confirm_window=5)
