@@ -1,0 +1,668 @@
+"""Tracking of other vessels in the LiDAR cloud (issue 17), in the style of SORT.
+
+Each scan: the points no wall explains are clustered (`clusters`); each track predicts with
+a constant-velocity Kalman filter (filterpy), state [x, y, vx, vy] in the inertial NED frame;
+clusters are assigned to tracks by the Hungarian method (`scipy.optimize.
+linear_sum_assignment`) on the Mahalanobis distance, gated; a matched track is updated, an
+unmatched cluster starts a tentative track, confirmed after `confirm_hits` hits within its
+first `confirm_window` scans; a track dies after `max_misses` scans or `max_coast_s` unseen,
+or when it leaves the view.
+
+What a cluster measures. The points lie on the faces turned to the sensor, so the box around
+them is partial: an L, a line, a bow alone. The tracker keeps the vessel's extent along and
+across its axis as the largest seen (at least a small boat's, `prior_length_m` x
+`prior_width_m`; under way, at least `prior_aspect` times as long as wide) and measures the
+centre axis by axis from the ends that are the vessel's own: where the crop did not cut it,
+the scan saw through the water just beyond it (`clusters.free_space`) and no detected
+segment runs on past it. An end hidden behind something nearer, or where the face goes on
+out of the height band or between the beams' rings, moves with the own boat, not with the
+vessel, and is not used. From both ends where the whole extent is seen, else from the one
+nearest the sensor, half the extent away; along an axis with no end of its own the filter
+predicts. So until a vessel has shown its whole length its centre lies nearer the sensor
+than the truth, by half the part not yet seen (a boat seen bow-on is placed half its
+assumed length behind its bow): the near end, the one a collision is about, is right. When
+more of it appears the extent grows and the centre moves with it, away from the end it is
+measured from, and the velocity does not change (the hidden part was always there).
+
+Static things (a piece of quay, a pier, a moored boat) are clusters too. They are tracked,
+and `moving` turns on only after `moving_hits` updates in a row in which the speed, along
+the directions the update measured, is above `moving_mps` and significant given the
+covariance (chi-square), and off after as many without; a track that is not moving is an
+obstacle like a wall, and its segments stay in `static_segments`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields, replace
+from functools import lru_cache
+
+import numpy as np
+
+from ..errors import InputError
+from ..geometry import wrap_angle
+from .clusters import Clusters, find_clusters, free_space, remember_walls
+from .detection import DEFAULT, DetectionConfig, crop_mask
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """Thresholds of the tracker, SI units. The crop and the view's range are detection's."""
+
+    detection: DetectionConfig = DEFAULT
+    # Clusters (see clusters.py).
+    max_vessel_length_m: float = 40.0  # longer segments, chains and clusters are walls
+    wall_margin_m: float = 0.3  # points this close to a wall are the wall's
+    wall_cell_m: float = 0.1  # grid the walls are drawn into
+    wall_extend_m: float = 3.0  # a wall's line claims its points this far beyond its ends
+    chain_gap_m: float = 1.0  # segment ends this close, ...
+    chain_angle_deg: float = 20.0  # ... at most this angle apart, make one wall
+    cell_m: float = 0.5  # clustering grid
+    min_points: int = 5  # fewest points of a cluster
+    edge_m: float = 1.0  # hull corners this close to the crop's edges are cut off there
+    collinear_deg: float = 3.0  # a segment this parallel on a wall's line is the wall
+    occluder_top_m: float = 3.0  # returns up to this height hide what lies behind them
+    free_step_m: float = 1.0  # an end is the object's if the scan saw through this far beyond
+    free_margin_m: float = 0.5  # ... it (the nearest return there this much farther, or none)
+    # Filter.
+    accel_sigma_mps2: float = 0.3  # white acceleration (small boats, erratic kayaks)
+    meas_sigma_m: float = 0.1  # a seen end or side of a vessel
+    anchor_sigma_m: float = 0.2  # more, where the centre is half an extent from one end
+    init_speed_sigma_mps: float = 2.0  # a new track's velocity (0 +- this)
+    gate_chi2: float = 13.8  # Mahalanobis gate (99.9 % of chi-square, 2 dof)
+    full_view_m: float = 0.5  # seen within this of the extent: both ends are in view
+    extent_growth_m: float = 1.0  # the extent grows by at most this per scan (merges)
+    prior_length_m: float = 3.0  # a small boat's extent until more is seen
+    prior_width_m: float = 1.0
+    prior_aspect: float = 3.0  # a moving hull is at least this many times as long as wide
+    align_gain: float = 0.3  # how fast the axis follows the hull's sides
+    realign_deg: float = 10.0  # a side this far off the axis replaces it (a wrong first guess)
+    course_sigma_deg: float = 10.0  # a course known this well picks which side is the length
+    # Life.
+    confirm_hits: int = 3
+    confirm_window: int = 5  # scans from birth in which to gather confirm_hits
+    tentative_misses: int = 2  # a tentative track dies after this many misses in a row
+    max_misses: int = 10  # a confirmed track after this many scans unseen ...
+    max_coast_s: float = 1.5  # ... or this long without a hit (scans missing or not)
+    # Motion.
+    moving_mps: float = 0.3
+    moving_chi2: float = 13.8  # v' P_vv^-1 v: speed significant given the covariance
+    moving_hits: int = 5  # updates in a row passing (failing) the test to turn on (off)
+    segment_margin_m: float = 0.5  # a segment this close inside a moving vessel's box is its
+    # Wall memory: lines of segments longer than any vessel seen in the last wall_memory_s
+    # claim the pieces on them up to wall_reach_m beyond their ends (the quay between and
+    # beyond moored boats; a wall's far end broken up at grazing angles).
+    wall_memory_s: float = 30.0
+    wall_reach_m: float = 120.0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.detection, DetectionConfig):
+            raise InputError(f"tracker config: detection must be a DetectionConfig, got "
+                             f"{type(self.detection).__name__}")
+        counts = ("min_points", "confirm_hits", "confirm_window", "tentative_misses",
+                  "max_misses", "moving_hits")
+        for f in fields(self):
+            if f.name == "detection":
+                continue
+            v = getattr(self, f.name)
+            if f.name in counts:
+                if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                    raise InputError(f"tracker config: {f.name} must be a whole number >= 1, "
+                                     f"got {v!r}")
+            elif isinstance(v, bool) or not isinstance(v, (int, float)) \
+                    or not math.isfinite(v) or v <= 0:
+                raise InputError(f"tracker config: {f.name} must be a positive number, got {v!r}")
+        if self.confirm_hits > self.confirm_window:
+            raise InputError("tracker config: confirm_hits must not exceed confirm_window")
+
+
+@dataclass(frozen=True, eq=False)
+class Track:
+    """One vessel as the tracker sees it (inertial NED frame, SI units)."""
+
+    id: int
+    position: np.ndarray  # (2,) m, the centre of the vessel's outline
+    velocity: np.ndarray  # (2,) m/s
+    heading_rad: float  # of the long axis; along the velocity when moving
+    length_m: float  # extent along the heading
+    width_m: float  # extent across it
+    covariance: np.ndarray  # (4, 4) of [x, y, vx, vy]
+    moving: bool  # speed above TrackerConfig.moving_mps with confidence
+    hits: int
+    misses: int  # scans in a row without a detection
+    age_s: float
+    first_seen_s: float
+    confirmed_s: float  # NaN while tentative
+
+    @property
+    def confirmed(self) -> bool:
+        return not math.isnan(self.confirmed_s)
+
+    @property
+    def speed_mps(self) -> float:
+        return float(math.hypot(*self.velocity))
+
+    @classmethod
+    def from_truth(cls, id: int, position, velocity, heading_rad: float, length_m: float,
+                   width_m: float, time_s: float = 0.0, moving_mps: float = 0.3,
+                   sigma_m: float = 0.05, sigma_mps: float = 0.02) -> "Track":
+        """A track from a true vessel state (the known-walls perception): exact, with a small
+        covariance, confirmed; `moving` when the speed is above `moving_mps`."""
+        p = np.array(position, float).reshape(2)
+        v = np.array(velocity, float).reshape(2)
+        p.setflags(write=False)
+        v.setflags(write=False)
+        cov = np.diag([sigma_m ** 2, sigma_m ** 2, sigma_mps ** 2, sigma_mps ** 2])
+        cov.setflags(write=False)
+        return cls(int(id), p, v, float(heading_rad), float(length_m), float(width_m), cov,
+                   bool(math.hypot(*v) > moving_mps), 1, 0, 0.0, float(time_s), float(time_s))
+
+    def as_record(self) -> dict:
+        """Plain numbers for a log row (JSON-ready)."""
+        return {"id": self.id, "x": float(self.position[0]), "y": float(self.position[1]),
+                "vx": float(self.velocity[0]), "vy": float(self.velocity[1]),
+                "heading_rad": self.heading_rad, "length_m": self.length_m,
+                "width_m": self.width_m,
+                "sigma_pos_m": float(math.sqrt(max(np.trace(self.covariance[:2, :2]), 0.0))),
+                "sigma_vel_mps": float(math.sqrt(max(np.trace(self.covariance[2:, 2:]), 0.0))),
+                "moving": self.moving, "hits": self.hits, "misses": self.misses,
+                "age_s": self.age_s, "first_seen_s": self.first_seen_s,
+                "confirmed_s": None if math.isnan(self.confirmed_s) else self.confirmed_s}
+
+
+@dataclass(frozen=True, eq=False)
+class TrackerOutput:
+    """One update's result. `status`: "ok", or why the scan was not used ("no_scan",
+    "bad_points", "bad_pose", "bad_time"); the tracks are then predicted only."""
+
+    time_s: float
+    tracks: tuple  # confirmed tracks (Track)
+    static_segments: np.ndarray  # (K, 4) the input segments not on a confirmed moving track
+    tentative: int  # unconfirmed tracks
+    clusters: int  # detections this scan
+    status: str = "ok"
+
+
+STATUSES = ("no_scan", "bad_points", "bad_pose", "bad_time", "dropped_points")
+
+
+@lru_cache(maxsize=64)
+def _transition(dt: float, accel_sigma: float):
+    """F and Q of the constant-velocity model over dt (white acceleration), [x, y, vx, vy];
+    cached: scans come at a steady rate."""
+    from filterpy.common import Q_discrete_white_noise
+
+    f = np.eye(4)
+    f[0, 2] = f[1, 3] = dt
+    q = Q_discrete_white_noise(2, dt, accel_sigma ** 2, block_size=2, order_by_dim=False)
+    f.setflags(write=False)
+    q.setflags(write=False)
+    return f, q
+
+
+def _mahalanobis2(y: np.ndarray, s: np.ndarray) -> float:
+    """y' S^-1 y for a 2-vector and a 2x2 covariance (closed form; 0 if S is singular)."""
+    a, b, c, d = float(s[0, 0]), float(s[0, 1]), float(s[1, 0]), float(s[1, 1])
+    det = a * d - b * c
+    if not det > 0:
+        return 0.0
+    y0, y1 = float(y[0]), float(y[1])
+    return (d * y0 * y0 - (b + c) * y0 * y1 + a * y1 * y1) / det
+
+
+class _Tracked:
+    """One track: the Kalman filter, the vessel's axis and extent, and its life."""
+
+    def __init__(self, id_, time_s, centre, cov, axis_rad, extent, cfg: TrackerConfig):
+        from filterpy.kalman import KalmanFilter
+
+        self.id = id_
+        self.kf = KalmanFilter(dim_x=4, dim_z=2)
+        self.kf.x = np.array([centre[0], centre[1], 0.0, 0.0])
+        p = np.zeros((4, 4))
+        p[:2, :2] = cov
+        p[2, 2] = p[3, 3] = cfg.init_speed_sigma_mps ** 2
+        self.kf.P = p
+        self.kf.H = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
+        self.axis = float(axis_rad)  # direction of the long axis, mod pi
+        self.extent = np.array(extent, float)  # along, across the axis
+        self.hits, self.misses, self.scans = 1, 0, 1
+        self.first_seen_s = self.last_hit_s = float(time_s)
+        self.confirmed_s = math.nan
+        self.moving, self._votes = False, 0
+        self.seen_box = None  # (u, v, lo, hi) of this scan's cluster, for static_segments
+
+    def predict(self, dt: float, cfg: TrackerConfig) -> None:
+        f, q = _transition(round(dt, 6), cfg.accel_sigma_mps2)
+        self.kf.predict(F=f, Q=q)
+
+    def align(self, angle: float, from_side: bool, cfg: TrackerConfig) -> bool:
+        """Turn the long axis toward the hull side a cluster shows (of its two directions,
+        the one nearer the course when moving, else the axis); True when the side was so
+        far off that it replaced the axis (the extents then start again)."""
+        if not from_side:
+            return False
+        course = self._course(cfg) if self.moving else None
+        ref = self.axis if course is None else course
+        cand = angle if abs(_half_turn(angle - ref)) <= math.pi / 4 else angle + math.pi / 2
+        d = _half_turn(cand - self.axis)
+        if abs(d) > math.radians(cfg.realign_deg):
+            if abs(d) > math.pi / 4:
+                self.extent = self.extent[::-1].copy()
+            self.axis = float(_half_turn(cand))
+            return True
+        self.axis = float(_half_turn(self.axis + cfg.align_gain * d))
+        return False
+
+    def _course(self, cfg: TrackerConfig) -> float | None:
+        """The course over ground, if the velocity gives it within `course_sigma_deg`."""
+        vx, vy = self.kf.x[2:]
+        speed = math.hypot(vx, vy)
+        if speed <= 0:
+            return None
+        across = np.array([-vy, vx]) / speed
+        sigma = math.sqrt(max(float(across @ self.kf.P[2:, 2:] @ across), 0.0)) / speed
+        return math.atan2(vy, vx) if sigma <= math.radians(cfg.course_sigma_deg) else None
+
+    def update(self, time_s, z, r, extent, shift, observed, cfg: TrackerConfig) -> None:
+        """A detection: centre z with covariance r, the extent, the shift of the centre its
+        growth implies, and the directions (rows) along which an end was seen."""
+        self.kf.x[:2] += shift  # the extent grew: the centre moves, the velocity does not
+        self.extent = extent
+        self.kf.update(z, R=r)
+        self.hits += 1
+        self.misses = 0
+        self.last_hit_s = float(time_s)
+        self._update_motion(observed, cfg)
+        if not self.moving and self.extent[1] > self.extent[0]:  # the long axis is along
+            self.axis = float(_half_turn(self.axis + math.pi / 2))
+            self.extent = self.extent[::-1].copy()
+
+    def _update_motion(self, observed: np.ndarray, cfg: TrackerConfig) -> None:
+        """The moving test, on the velocity along the directions this detection measured;
+        no vote when they miss the course (a cluster whose ends along it are cut off or
+        hidden says nothing of that motion)."""
+        speed = math.hypot(*self.kf.x[2:])
+        if not len(observed) or (speed > 0 and np.abs(observed @ self.kf.x[2:]).max()
+                                 < math.cos(math.pi / 4) * speed):
+            return  # (its course lies along no direction measured now)
+        v = observed @ self.kf.x[2:]
+        pv = observed @ self.kf.P[2:, 2:] @ observed.T
+        if len(v) == 2:
+            m2 = _mahalanobis2(v, pv)
+        else:
+            m2 = float(v[0] ** 2 / pv[0, 0]) if pv[0, 0] > 0 else 0.0
+        passes = (self.hits >= cfg.confirm_hits and float(np.hypot.reduce(v)) >= cfg.moving_mps
+                  and m2 >= cfg.moving_chi2)
+        if passes != self.moving:
+            self._votes += 1
+            if self._votes >= cfg.moving_hits:
+                self.moving, self._votes = passes, 0
+                course = self._course(cfg)
+                if passes and course is not None \
+                        and abs(_half_turn(course - self.axis)) > math.pi / 3:
+                    # A hull is longer than wide: seen bow-on at first, it turns its axis.
+                    self.extent = self.extent[::-1].copy()
+                    self.axis = float(_half_turn(self.axis + math.pi / 2))
+        else:
+            self._votes = 0
+
+    def snapshot(self, time_s: float) -> Track:
+        x = self.kf.x.copy()
+        p = self.kf.P.copy()
+        heading = float(_half_turn(self.axis))
+        if self.moving and math.cos(heading) * x[2] + math.sin(heading) * x[3] < 0:
+            heading = float(wrap_angle(heading + math.pi))
+        pos, vel = x[:2], x[2:]
+        for a in (pos, vel, p):
+            a.setflags(write=False)
+        return Track(self.id, pos, vel, heading, float(self.extent[0]), float(self.extent[1]),
+                     p, self.moving, self.hits, self.misses, float(time_s - self.first_seen_s),
+                     self.first_seen_s, self.confirmed_s)
+
+
+class VesselTracker:
+    """Tracks of the vessels in a sequence of scans; `update` once per scan (~10 Hz).
+
+    Nothing a scan delivers makes it raise: no cloud, an empty one, NaN points, a NaN pose or
+    a time that does not advance are counted in `counts` and the tracks are predicted only.
+    Deterministic: the same inputs give the same tracks.
+    """
+
+    def __init__(self, config: TrackerConfig | None = None):
+        self.config = config or TrackerConfig()
+        det = self.config.detection
+        self._occluder_crop = replace(det, max_height_m=max(det.max_height_m,
+                                                            self.config.occluder_top_m))
+        self._tracks: list[_Tracked] = []
+        self._next_id = 1
+        self._time_s: float | None = None
+        self.counts = dict.fromkeys(STATUSES, 0)  # over the run
+        self._walls = np.zeros((0, 5))  # wall lines seen lately (clusters.remember_walls)
+
+    @property
+    def tracks(self) -> tuple:
+        """All tracks, tentative ones included (confirmed_s NaN), for debugging and logs."""
+        t = math.nan if self._time_s is None else self._time_s
+        return tuple(k.snapshot(t) for k in self._tracks)
+
+    def update(self, time_s, points, pose, segments=None) -> TrackerOutput:
+        """One scan: `points` (N, 3) body frame (x fwd, y stbd, z down) or None, `pose`
+        (x, y, psi) of the boat in NED placing the cloud, `segments` (M, 4) the walls
+        `detect_segments` found in the same cloud (x_c, y_c, theta, length)."""
+        cfg = self.config
+        segs = _clean_segments(segments)
+        t = _finite_float(time_s)
+        if t is None or (self._time_s is not None and t < self._time_s):
+            self.counts["bad_time"] += 1
+            return self._output(self._time_s, segs, 0, "bad_time")
+        dt = 0.0 if self._time_s is None else t - self._time_s
+        self._time_s = t
+        if dt > 0:
+            for k in self._tracks:
+                k.predict(dt, cfg)
+        status, cloud = _clean_cloud(points)
+        p = _finite_pose(pose)
+        if status == "dropped_points":  # some rows had NaN: counted, the rest used
+            self.counts["dropped_points"] += 1
+            status = "ok"
+        if status == "ok" and p is None:
+            status = "bad_pose"
+        if status != "ok":
+            self.counts[status] += 1
+            self._end_of_life(t, p, scanned=False)
+            return self._output(t, segs, 0, status)
+        # The crop with a taller band: all of it can hide things (free_space), the
+        # detection band of it is what the clusters are made of. (Columns one by one:
+        # fast for the column-major clouds LiDAR drivers and the simulator deliver.)
+        idx = np.flatnonzero(crop_mask(cloud, self._occluder_crop))
+        occluders = np.empty((len(idx), 2), cloud.dtype)
+        occluders[:, 0] = cloud[:, 0].take(idx)
+        occluders[:, 1] = cloud[:, 1].take(idx)
+        z = cloud[:, 2].take(idx)
+        band = (z <= -cfg.detection.min_height_m) & (z >= -cfg.detection.max_height_m)
+        xy = occluders[band].astype(float)
+        found = find_clusters(xy, p, segs, cfg, self._walls, occluders)
+        self._walls = remember_walls(self._walls, segs[segs[:, 3] > cfg.max_vessel_length_m],
+                                     t, cfg)
+        self._associate(t, found, p)
+        self._end_of_life(t, p, scanned=True)
+        return self._output(t, segs, len(found), "ok")
+
+    # -- one scan ---------------------------------------------------------------------
+    def _associate(self, t: float, found: Clusters, pose) -> None:
+        from scipy.optimize import linear_sum_assignment
+
+        cfg = self.config
+        sensor = np.array(pose[:2], float)
+        for k in self._tracks:
+            k.seen_box = None
+        n_t, n_c = len(self._tracks), len(found)
+        cost = np.full((n_t, n_c), np.inf)
+        meas = {}
+        for a, k in enumerate(self._tracks):
+            x = k.kf.x[:2]
+            reach = 0.5 * (k.extent.max() + 0.0) + 3.0 * math.sqrt(max(np.trace(k.kf.P[:2, :2]), 0.0)) + 2.0
+            near = np.flatnonzero(np.hypot(*(found.centre - x).T) <= reach + 0.5 * found.size[:, 0])
+            for b in near.tolist():
+                m = _measure(k, found, b, sensor, cfg)
+                y = m[0] - (x + m[3])
+                s = k.kf.P[:2, :2] + m[1]
+                d2 = _mahalanobis2(y, s)
+                if d2 <= cfg.gate_chi2:
+                    cost[a, b] = d2
+                    meas[a, b] = m
+        used = np.zeros(n_c, bool)
+        if meas:
+            rows, cols = linear_sum_assignment(np.where(np.isfinite(cost), cost, 1e9))
+            for a, b in zip(rows.tolist(), cols.tolist()):
+                if (a, b) not in meas:
+                    continue
+                k = self._tracks[a]
+                realigned = k.align(float(found.angle[b]), bool(found.from_side[b]), cfg)
+                if realigned:
+                    k.extent = np.array([cfg.prior_length_m, cfg.prior_width_m])
+                    k.extent = np.maximum(k.extent, _seen(k.axis, found.hulls[b]))
+                z, r, extent, shift, box = (_measure(k, found, b, sensor, cfg) if realigned
+                                            else meas[a, b])
+                if realigned:  # new axes, new extents: the centre is where they put it
+                    shift = z - k.kf.x[:2]
+                k.update(t, z, r, extent, shift, box[2], cfg)
+                k.seen_box = box
+                used[b] = True
+        for k in self._tracks:
+            if k.seen_box is None:
+                k.misses += 1
+            k.scans += 1
+            if math.isnan(k.confirmed_s) and k.hits >= cfg.confirm_hits:
+                k.confirmed_s = t
+        for b in np.flatnonzero(~used).tolist():
+            if not any(_inside(k, found.centre[b], cfg) for k in self._tracks):
+                self._birth(t, found, b, sensor)
+
+    def _birth(self, t: float, found: Clusters, b: int, sensor) -> None:
+        cfg = self.config
+        extent = np.maximum(found.size[b], (cfg.prior_length_m, cfg.prior_width_m))
+        k = _Tracked(self._next_id, t, found.centre[b], np.eye(2), found.angle[b], extent, cfg)
+        z, r, extent, _, box = _measure(k, found, b, sensor, cfg)
+        k.kf.x[:2] = z
+        # An axis with no end in view: the centre is somewhere along the extent.
+        w, vecs = np.linalg.eigh(r)
+        k.kf.P[:2, :2] = (vecs * np.minimum(w, (0.5 * extent.max()) ** 2)) @ vecs.T
+        k.extent = extent
+        k.seen_box = box
+        self._next_id += 1
+        self._tracks.append(k)
+
+    def _end_of_life(self, t: float, pose, scanned: bool) -> None:
+        cfg = self.config
+        keep = []
+        for k in self._tracks:
+            if math.isnan(k.confirmed_s):
+                dead = k.misses >= cfg.tentative_misses or (scanned and k.scans > cfg.confirm_window)
+            else:
+                dead = k.misses >= cfg.max_misses or t - k.last_hit_s > cfg.max_coast_s
+            if not dead and pose is not None:
+                dead = not _in_view(k, pose, cfg)
+            if not dead:
+                keep.append(k)
+        self._tracks = keep
+
+    def _output(self, t, segs: np.ndarray, n_clusters: int, status: str) -> TrackerOutput:
+        t = math.nan if t is None else t
+        confirmed = [k for k in self._tracks if not math.isnan(k.confirmed_s)]
+        on_vessel = np.zeros(len(segs), bool)
+        for k in confirmed:
+            if k.moving:
+                on_vessel |= _segments_on(k, segs, self.config)
+        return TrackerOutput(t, tuple(k.snapshot(t) for k in confirmed), segs[~on_vessel],
+                             len(self._tracks) - len(confirmed), n_clusters, status)
+
+
+# -- what a cluster measures -----------------------------------------------------------
+_CUT_COS = math.cos(math.radians(50.0))  # a cut this close to an axis' direction cuts its end
+_END_M = 0.3  # hull corners this close to an end are that end's
+
+
+def _seen(axis_rad: float, hull: np.ndarray) -> np.ndarray:
+    """(2,) the extent of a hull along and across an axis."""
+    c, s = math.cos(axis_rad), math.sin(axis_rad)
+    p = hull @ np.array([[c, -s], [s, c]])
+    return p.max(axis=0) - p.min(axis=0)
+
+
+def _measure(k: _Tracked, found: Clusters, b: int, sensor, cfg: TrackerConfig):
+    """The centre a cluster (its hull and which corners are cut off) measures for track k:
+    (z (2,), R (2, 2), new extent (2,), shift of the track's centre (2,), (the axes, the
+    seen box on them, the axes along which an end was seen: the directions it measures)).
+
+    Axis by axis: where both ends are in view and the whole extent is seen, the middle;
+    else the end nearest the sensor (or, cut off, the other), half the extent away. When
+    the extent grows, the centre shifts by half the growth away from that end.
+    """
+    hull = found.hulls[b]
+    c, s = math.cos(k.axis), math.sin(k.axis)
+    axes = np.array([[c, s], [-s, c]])  # rows: along, across
+    proj = hull @ axes.T  # (h, 2)
+    centre = axes @ k.kf.x[:2]
+    eye = axes @ sensor
+    lo_hi = np.column_stack([proj.min(axis=0), proj.max(axis=0)])
+    # The extent seen: the cluster's own box (on its own sides, so a lagging axis, a
+    # weaving kayak, does not stretch it), its long side on the axis nearer the track's.
+    seen = found.size[b].copy()
+    if abs(_half_turn(float(found.angle[b]) - k.axis)) > math.pi / 4:
+        seen = seen[::-1]
+    old = k.extent
+    extent = np.minimum(np.maximum(old, np.minimum(seen, old + cfg.extent_growth_m)),
+                        cfg.max_vessel_length_m)
+    if k.moving:  # a boat under way is longer than wide
+        extent[0] = min(max(extent[0], cfg.prior_aspect * extent[1]), cfg.max_vessel_length_m)
+    real = _real_ends(found, b, axes, proj, lo_hi, cfg)
+    z = np.empty(2)
+    sigma = np.empty(2)
+    shift = np.zeros(2)
+    informative = np.ones(2, bool)
+    for i in range(2):
+        lo, hi = lo_hi[i]
+        lo_real, hi_real = real[i]
+        near_lo = abs(lo - eye[i]) <= abs(hi - eye[i])
+        anchor_lo = near_lo if (lo_real if near_lo else hi_real) else not near_lo
+        if not (lo_real if anchor_lo else hi_real):  # both ends cut off: no information,
+            z[i], sigma[i] = centre[i], 1e3  # and no telling which way it grew
+            extent[i] = old[i]
+            informative[i] = False
+            continue
+        shift[i] = 0.5 * (extent[i] - old[i]) * (1.0 if anchor_lo else -1.0)
+        if lo_real and hi_real and seen[i] >= extent[i] - cfg.full_view_m:
+            z[i], sigma[i] = 0.5 * (lo + hi), cfg.meas_sigma_m
+        else:
+            z[i] = lo + 0.5 * extent[i] if anchor_lo else hi - 0.5 * extent[i]
+            sigma[i] = math.hypot(cfg.meas_sigma_m, cfg.anchor_sigma_m)
+    r = (axes.T * sigma ** 2) @ axes
+    return axes.T @ z, r, extent, axes.T @ shift, (axes, lo_hi, axes[informative])
+
+
+def _real_ends(found: Clusters, b: int, axes, proj, lo_hi, cfg: TrackerConfig) -> np.ndarray:
+    """(2, 2) bool [axis, low/high end]: the end is the object's, not cut off by the crop
+    (no corner within `edge_m` of it cut in its direction) and not hidden: the scan saw
+    through the water `free_step_m` beyond its corners (those at the end itself: a point
+    beyond a corner of the side next to it would lie on the end's own face), and no
+    segment through the cluster reaches on beyond it."""
+    hull, cut = found.hulls[b], found.cut[b]
+    sign = np.array([-1.0, 1.0])
+    inward = (proj.T[:, None, :] - lo_hi[:, :, None]) * sign[None, :, None]  # (2, 2, h)
+    cut_out = (axes @ cut.T)[:, None, :] * sign[None, :, None] > _CUT_COS
+    real = ~((inward >= -cfg.edge_m) & cut_out).any(axis=2)
+    i, j, h = np.nonzero(inward >= -_END_M)
+    beyond = hull[h] + (sign[j] * cfg.free_step_m)[:, None] * axes[i]
+    free = free_space(found, beyond, cfg.free_margin_m)
+    hidden = (np.bincount(2 * i + j, ~free, minlength=4) > 0).reshape(2, 2)
+    faces = found.faces[b] if found.faces else ()
+    if len(faces):  # a face the line detector followed on beyond an end: it goes on there
+        f = faces.reshape(-1, 2) @ axes.T  # (2f, 2)
+        hidden[:, 0] |= f.min(axis=0) < lo_hi[:, 0] - cfg.free_step_m
+        hidden[:, 1] |= f.max(axis=0) > lo_hi[:, 1] + cfg.free_step_m
+    return real & ~hidden
+
+
+def _inside(k: _Tracked, xy, cfg: TrackerConfig) -> bool:
+    """Whether a point lies inside track k's predicted outline (plus the cluster cell)."""
+    c, s = math.cos(k.axis), math.sin(k.axis)
+    d = np.asarray(xy) - k.kf.x[:2]
+    return (abs(c * d[0] + s * d[1]) <= 0.5 * k.extent[0] + cfg.cell_m
+            and abs(-s * d[0] + c * d[1]) <= 0.5 * k.extent[1] + cfg.cell_m)
+
+
+def _in_view(k: _Tracked, pose, cfg: TrackerConfig) -> bool:
+    """Whether some of track k's predicted outline lies inside the crop's range square."""
+    x, y, psi = pose
+    c, s = math.cos(psi), math.sin(psi)
+    dx, dy = k.kf.x[0] - x, k.kf.x[1] - y
+    reach = cfg.detection.range_m + 0.5 * float(k.extent.max())
+    return abs(c * dx + s * dy) <= reach and abs(-s * dx + c * dy) <= reach
+
+
+def _segments_on(k: _Tracked, segs: np.ndarray, cfg: TrackerConfig) -> np.ndarray:
+    """(M,) bool: segments with both ends inside track k's outline (its centre and extent
+    now) or the box of this scan's cluster on its axes (the line detector bridges a little
+    past the returns the cluster kept), grown by segment_margin_m, and by twice the
+    position's sigma where the track was not seen this scan."""
+    if not len(segs):
+        return np.zeros(0, bool)
+    c, s = math.cos(k.axis), math.sin(k.axis)
+    axes = np.array([[c, s], [-s, c]])
+    mid = axes @ k.kf.x[:2]
+    lo_hi = np.column_stack([mid - 0.5 * k.extent, mid + 0.5 * k.extent])
+    if k.seen_box is not None:
+        seen_axes, seen = k.seen_box[:2]
+        if np.allclose(seen_axes, axes):
+            lo_hi = np.column_stack([np.minimum(lo_hi[:, 0], seen[:, 0]),
+                                     np.maximum(lo_hi[:, 1], seen[:, 1])])
+        margin = cfg.segment_margin_m
+    else:
+        margin = cfg.segment_margin_m + 2.0 * math.sqrt(max(np.trace(k.kf.P[:2, :2]), 0.0))
+    half = 0.5 * segs[:, 3:4] * np.column_stack([np.cos(segs[:, 2]), np.sin(segs[:, 2])])
+    ok = np.ones(len(segs), bool)
+    for end in (segs[:, :2] - half, segs[:, :2] + half):
+        p = end @ axes.T
+        ok &= ((p >= lo_hi[:, 0] - margin) & (p <= lo_hi[:, 1] + margin)).all(axis=1)
+    return ok
+
+
+# -- run-time input: cleaned, never raised on -------------------------------------------
+def _half_turn(theta):
+    """Direction of an undirected axis in [-pi/2, pi/2)."""
+    return (theta + math.pi / 2) % math.pi - math.pi / 2
+
+
+def _finite_float(v) -> float | None:
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return None
+    return f if math.isfinite(f) else None
+
+
+def _finite_pose(pose):
+    try:
+        p = np.asarray(pose, float).reshape(-1)
+    except (TypeError, ValueError):
+        return None
+    if p.shape != (3,) or not np.isfinite(p).all():
+        return None
+    return float(p[0]), float(p[1]), float(p[2])
+
+
+def _clean_cloud(points):
+    """("ok" | "dropped_points" | "no_scan" | "bad_points", cloud)."""
+    if points is None:
+        return "no_scan", None
+    try:
+        arr = np.asarray(points)
+    except (TypeError, ValueError):
+        return "bad_points", None
+    if arr.dtype.kind not in "fiu" or (arr.size and (arr.ndim != 2 or arr.shape[1] != 3)):
+        return "bad_points", None
+    if arr.size == 0:
+        return "no_scan", None
+    if arr.dtype.kind != "f":
+        arr = arr.astype(float)
+    if np.isfinite(arr.sum()):
+        return "ok", arr
+    finite = np.isfinite(arr).all(axis=1)
+    if not finite.any():
+        return "bad_points", None
+    return "dropped_points", arr[finite]
+
+
+def _clean_segments(segments) -> np.ndarray:
+    """The finite rows of an (M, 4) array; anything else is no segments."""
+    if segments is None:
+        return np.zeros((0, 4))
+    try:
+        s = np.asarray(segments, float)
+    except (TypeError, ValueError):
+        return np.zeros((0, 4))
+    if s.ndim != 2 or s.shape[1] != 4:
+        return np.zeros((0, 4))
+    return s[np.isfinite(s).all(axis=1)]
