@@ -156,6 +156,7 @@ class ResultsTable:
 
     def add(self, outcome: dict) -> dict:
         row = outcome["row"]
+        row["finished_at"] = _utc_now()
         if outcome.get("traceback"):
             row["traceback"] = outcome["traceback"]
         folder = self.out_dir / row["folder"]
@@ -180,6 +181,10 @@ class ResultsTable:
     def close(self) -> None:
         self.write_json(force=True)
         self._fh.close()
+
+
+def _utc_now() -> str:
+    return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
 
 
 def _csv_row(row: dict) -> dict:
@@ -284,6 +289,19 @@ class StudyOutcome:
     wall_s: float
     workers: int
     where: str  # "local cluster of N workers" or the scheduler's address
+    interrupted: bool = False
+    started_at: str = ""
+
+    def session(self) -> dict:
+        """This session's line in sessions.jsonl: where, how many runs, how fast."""
+        walls = [r["wall_s"] for r in self.rows if r["run_id"] in set(self.executed)
+                 and isinstance(r.get("wall_s"), (int, float))]
+        return {"started_at": self.started_at, "ended_at": _utc_now(), "where": self.where,
+                "workers": self.workers, "runs": len(self.executed),
+                "wall_s": round(self.wall_s, 1), "interrupted": self.interrupted,
+                "runs_per_min": round(60 * len(self.executed) / self.wall_s, 3)
+                if self.wall_s > 0 else None,
+                "mean_run_wall_s": round(sum(walls) / len(walls), 2) if walls else None}
 
 
 def require_dask():
@@ -311,7 +329,7 @@ def connect(scheduler: str | None = None, workers: int | None = None,
         return client, None, f"scheduler {scheduler}"
     n = workers or os.cpu_count() or 1
     cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                       dashboard_address=None)
+                                       dashboard_address=":0")
     return distributed.Client(cluster), cluster, f"local cluster of {n} workers"
 
 
@@ -387,6 +405,8 @@ def run_study(study: Study, out_dir, *, client=None, scheduler: str | None = Non
         where = f"client of {client.scheduler.address}"
     executed: list[str] = []
     t0 = time.perf_counter()
+    started = _utc_now()
+    interrupted = True
     try:
         _start_folder(study, out_dir)
         table = ResultsTable(out_dir, study, kept)
@@ -397,12 +417,17 @@ def run_study(study: Study, out_dir, *, client=None, scheduler: str | None = Non
                 if n_workers == 0 and stream is not None:
                     stream.write(f"{where}: no workers yet; the runs wait for them\n")
                 _gather(client, todo, table, bar, executed, on_row)
+            interrupted = False
         finally:
             wall = time.perf_counter() - t0
             if bar is not None:
                 bar.close()
             table.close()
-            outcome = StudyOutcome(table.rows, executed, len(kept), wall, n_workers, where)
+            outcome = StudyOutcome(table.rows, executed, len(kept), wall, n_workers, where,
+                                   interrupted, started)
+            if executed or interrupted:
+                with (out_dir / "sessions.jsonl").open("a") as fh:
+                    fh.write(json.dumps(outcome.session()) + "\n")
             write_report(study, outcome, out_dir)
     finally:
         if own:
@@ -413,12 +438,14 @@ def run_study(study: Study, out_dir, *, client=None, scheduler: str | None = Non
 
 
 def _gather(client, todo: list[RunSpec], table: ResultsTable, bar, executed, on_row) -> None:
-    """Submit every run, longest scenarios first, and record each as it completes."""
+    """Submit every run, longest scenarios first and otherwise in the order of their ids
+    (a seeded shuffle: each stretch of the study is a mix of its runs, so the rate and the
+    time left are fair from the start), and record each as it completes."""
     from distributed import as_completed
 
     by_key = {}
     futures = []
-    for spec in todo:
+    for spec in sorted(todo, key=lambda r: (-r.expected_s, r.run_id)):
         f = client.submit(execute_run, spec, key=f"canalnav-run-{spec.run_id}",
                           priority=int(spec.expected_s), pure=False)
         by_key[f.key] = spec

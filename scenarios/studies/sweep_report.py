@@ -110,6 +110,7 @@ def write_report(study, outcome, out_dir: Path) -> Path:
     if len(clear):
         lines += [f"Min clearance over the runs: min {_q(clear, 0)} m, p10 {_q(clear, 0.1)} m, "
                   f"median {_q(clear, 0.5)} m; J_c median {_q(jc, 0.5)}, p90 {_q(jc, 0.9)}.", ""]
+    lines += _sessions(out_dir)
     plots = []
     for factor in study.factors:
         table = factor_table(rows, factor)
@@ -131,6 +132,27 @@ def write_report(study, outcome, out_dir: Path) -> Path:
     path = out_dir / "report.md"
     path.write_text("\n".join(lines) + "\n")
     return path
+
+
+def _sessions(out_dir: Path) -> list[str]:
+    """The sessions that made the table (sessions.jsonl): where, runs, time, rate."""
+    import json
+
+    try:
+        sessions = [json.loads(line) for line in
+                    (out_dir / "sessions.jsonl").read_text().splitlines() if line.strip()]
+    except (OSError, ValueError):
+        return []
+    if not sessions:
+        return []
+    out = ["## Sessions", "",
+           "| started (UTC) | where | workers | runs | wall (min) | runs/min | mean run wall (s) "
+           "| |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for s in sessions:
+        out.append(f"| {s['started_at']} | {s['where']} | {s['workers']} | {s['runs']} | "
+                   f"{s['wall_s'] / 60:.1f} | {s['runs_per_min']} | {s['mean_run_wall_s']} | "
+                   f"{'interrupted' if s['interrupted'] else 'finished'} |")
+    return out + [""]
 
 
 def _worst(rows: list[dict]) -> list[str]:

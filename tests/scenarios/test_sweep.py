@@ -215,8 +215,9 @@ def test_a_run_that_raises_is_recorded_with_its_traceback(tiny, tmp_path, monkey
 def threads_client():
     """An in-process Dask cluster of one worker thread (fast to start; processes below)."""
     distributed = pytest.importorskip("distributed")
-    with distributed.Client(processes=False, n_workers=1, threads_per_worker=1,
-                            dashboard_address=None) as client:
+    with distributed.LocalCluster(processes=False, n_workers=1, threads_per_worker=1,
+                                  dashboard_address=":0") as cluster, \
+            distributed.Client(cluster) as client:
         yield client
 
 
@@ -294,6 +295,9 @@ def test_resume_after_an_interruption_reruns_nothing_that_finished(tiny, tmp_pat
         assert (out / r["folder"] / "summary.json").stat().st_mtime_ns == stamps[rid]
     again = sweep.run_study(study, out, client=threads_client, progress=False, resume=True)
     assert again.executed == [] and len(again.rows) == 4
+    sessions = [json.loads(s) for s in (out / "sessions.jsonl").read_text().splitlines()]
+    assert [(s["runs"], s["interrupted"]) for s in sessions] == [(2, True), (2, False)]
+    assert "## Sessions" in (out / "report.md").read_text()
 
 
 @pytest.mark.slow
@@ -319,7 +323,7 @@ def test_a_worker_killed_in_the_middle_has_its_runs_run_elsewhere(tiny, tmp_path
         killed.update(address=victim, lost=[k.removeprefix("canalnav-run-") for k in lost])
 
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster, \
+                                  dashboard_address=":0") as cluster, \
             distributed.Client(cluster) as client:
         outcome = sweep.run_study(study, out, client=client, progress=False, on_row=kill)
     rows = _csv(out / "results.csv")
