@@ -29,8 +29,10 @@ def register_bench(sub) -> None:
 def run(args) -> int:
     from controller.errors import InputError
     from scenarios.studies.soak import report, scenario_files, soak_study
+    from scenarios.commands.sweep import check_engine_options
     from scenarios.studies.sweep import require_dask, run_study
 
+    check_engine_options(args)
     paths = [Path(p) for p in args.scenarios] or scenario_files()
     missing = [str(p) for p in paths if not p.is_file()]
     if missing:

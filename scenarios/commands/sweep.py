@@ -38,6 +38,16 @@ def add_engine_options(p) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress line on stderr")
 
 
+def check_engine_options(args) -> None:
+    from controller.errors import InputError
+
+    if args.scheduler and args.workers:
+        raise InputError("--workers sizes the local cluster; with --scheduler the cluster's "
+                         "own workers run the study")
+    if not args.connect_timeout > 0:
+        raise InputError(f"--connect-timeout must be > 0 seconds, got {args.connect_timeout}")
+
+
 def register(sub) -> None:
     p = sub.add_parser(
         "sweep", help="a study of many runs (scenarios x seeds x controllers x overrides) on "
@@ -57,6 +67,7 @@ def run(args) -> int:
     from scenarios.studies.sweep import require_dask, run_study
     from scenarios.studies.sweep_spec import load_study
 
+    check_engine_options(args)
     study = load_study(args.spec)  # every check before any run, or before a cluster starts
     require_dask()
     outcome = run_study(study, args.out, scheduler=args.scheduler, workers=args.workers,

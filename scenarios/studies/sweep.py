@@ -32,7 +32,7 @@ import traceback
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from controller.errors import InputError
+from controller.errors import CanalnavError, InputError
 from scenarios.studies.sweep_spec import RunSpec, Study
 
 EXTRA_HINT = "pip install 'canalnav[sweep]'"
@@ -304,6 +304,10 @@ class StudyOutcome:
                 "mean_run_wall_s": round(sum(walls) / len(walls), 2) if walls else None}
 
 
+class StudyLost(CanalnavError):
+    """The cluster went away in the middle of a study (what finished is in the table)."""
+
+
 def require_dask():
     """dask.distributed, or an InputError naming the extra to install."""
     try:
@@ -416,7 +420,12 @@ def run_study(study: Study, out_dir, *, client=None, scheduler: str | None = Non
                 n_workers = _worker_count(client)
                 if n_workers == 0 and stream is not None:
                     stream.write(f"{where}: no workers yet; the runs wait for them\n")
-                _gather(client, todo, table, bar, executed, on_row)
+                try:
+                    _gather(client, todo, table, bar, executed, on_row)
+                except (OSError, TimeoutError) as exc:  # the scheduler went away
+                    raise StudyLost(f"{where}: lost the connection ({type(exc).__name__}: "
+                                    f"{exc}); {len(table.rows)} runs are in {out_dir}: "
+                                    f"--resume continues") from None
             interrupted = False
         finally:
             wall = time.perf_counter() - t0

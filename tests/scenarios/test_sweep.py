@@ -335,3 +335,22 @@ def test_a_worker_killed_in_the_middle_has_its_runs_run_elsewhere(tiny, tmp_path
     for rid in killed["lost"]:  # run again, on another worker
         assert by_id[rid]["worker"] != killed["address"]
     assert len(outcome.executed) == len(study.runs)
+
+
+def test_without_dask_the_error_names_the_extra(tiny, tmp_path, monkeypatch, capsys):
+    import builtins
+
+    real = builtins.__import__
+
+    def no_dask(name, *a, **k):
+        if name.split(".")[0] in ("distributed", "dask"):
+            raise ImportError(f"No module named {name!r}")
+        return real(name, *a, **k)
+
+    monkeypatch.setattr(builtins, "__import__", no_dask)
+    spec = study_file(tmp_path, '[study]\nscenarios = ["tiny.toml"]\n')
+    assert main(["sweep", str(spec), "--out", str(tmp_path / "out")]) == 2
+    assert "pip install 'canalnav[sweep]'" in capsys.readouterr().err
+    assert main(["sweep", str(spec), "--out", str(tmp_path / "o"), "--workers", "2",
+                 "--scheduler", "tcp://127.0.0.1:1"]) == 2
+    assert "--workers sizes the local cluster" in capsys.readouterr().err
