@@ -70,6 +70,7 @@ def register(sub) -> None:
 def run(args) -> int:
     from scenarios.loop.closed_loop import terminal_events, terminal_progress
     from scenarios.loop.runner import check_criteria, run_scenario
+
     scenario = load_with_overrides(args.scenario, args.set)
     controller = args.controller or scenario.controller
     out = Path(args.out or f"runs/{scenario.name}-{controller}")

@@ -70,7 +70,8 @@ def execute_run(spec: RunSpec) -> dict:
         out = Path(tmp) / spec.folder
         try:
             scenario = scenario_with_overrides(spec.scenario_text, spec.scenario_file,
-                                               spec.overrides, dict(spec.files))
+                                               spec.overrides, dict(spec.files),
+                                               path=Path(spec.scenario_file))
             result = run_scenario(scenario, out, controller=spec.controller, seed=spec.seed,
                                   plant=spec.plant, plots=spec.plots, parallel_perception=False)
             row.update(summary_row(result.summary, result.timing,
