@@ -335,7 +335,8 @@ def connect(scheduler: str | None = None, workers: int | None = None,
     n = workers or os.cpu_count() or 1
     cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                        dashboard_address=":0")
-    return distributed.Client(cluster), cluster, f"local cluster of {n} worker{'s' if n > 1 else ''}"
+    where = f"local cluster of {n} worker{'s' if n > 1 else ''}"
+    return distributed.Client(cluster), cluster, where
 
 
 def _check_workers(client, scheduler: str) -> None:
