@@ -345,8 +345,8 @@ def _check_workers(client, scheduler: str) -> None:
     try:
         theirs = client.run(package_version)
     except Exception as exc:  # the function does not unpickle there: no package
-        raise InputError(f"--scheduler {scheduler}: a worker cannot run canalnav ({_one_line(exc)}); "
-                         "install the package on every worker") from None
+        raise InputError(f"--scheduler {scheduler}: a worker cannot run canalnav "
+                         f"({_one_line(exc)}); install the package on every worker") from None
     wrong = {w: v for w, v in theirs.items() if v != mine}
     if wrong:
         w, v = next(iter(wrong.items()))
