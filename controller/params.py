@@ -149,10 +149,19 @@ class BoatParams:
         """Load the `[boat]` table of a TOML file (or the top level if it has none)."""
         path = Path(path)
         try:
-            with path.open("rb") as fh:
-                doc = tomllib.load(fh)
+            text = path.read_bytes().decode("utf-8")
         except FileNotFoundError:
             raise InputError(f"{path}: no such parameter file") from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise InputError(f"{path}: cannot read the parameter file: {exc}") from None
+        return cls.from_toml_text(text, str(path))
+
+    @classmethod
+    def from_toml_text(cls, text: str, source: str = "<string>") -> "BoatParams":
+        """`from_toml` of a file's text; `source` names it in errors."""
+        path = source
+        try:
+            doc = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
             raise InputError(f"{path}: not valid TOML: {exc}") from None
         table = doc.get("boat", doc)

@@ -483,22 +483,33 @@ def check_on_water(world: CanalWorld, route: _Route, source: str) -> None:
                              f"({p[0]:.1f}, {p[1]:.1f}) lies {why}")
 
 
+def parameter_file_path(source: str, rel: str) -> Path:
+    """Where a parameter file named in a scenario (`[plant.boat] file = ...`) lives: beside
+    the scenario file (or as given, for a scenario from a string)."""
+    return (Path(source).parent / rel) if source != "<string>" else Path(rel)
+
+
 def _distinct(waypoints: np.ndarray) -> np.ndarray:
     """The waypoints without consecutive repeats (as the reference path sees them)."""
     keep = np.concatenate([[True], np.hypot(*np.diff(waypoints, axis=0).T) > 1e-9])
     return waypoints[keep]
 
 
-def _params(t: _Table | None, base: BoatParams, source: str) -> BoatParams:
+def _params(t: _Table | None, base: BoatParams, source: str,
+            files: dict | None = None) -> BoatParams:
     """A [plant.boat] / [controller.boat] table: a parameter file and/or overrides, or a
-    common relative change (`scale_all`)."""
+    common relative change (`scale_all`). The file's text comes from `files` if it is there
+    (a study sends it with the run), else from the disk beside the scenario file."""
     if t is None:
         return base
     params = base
     if t.has("file"):
         rel = t.string("file")
-        path = (Path(source).parent / rel) if source != "<string>" else Path(rel)
-        params = BoatParams.from_toml(path)
+        path = parameter_file_path(source, rel)
+        if files is not None and rel in files:
+            params = BoatParams.from_toml_text(files[rel], str(path))
+        else:
+            params = BoatParams.from_toml(path)
     overrides = {k: v for k, v in t.data.items() if k not in ("file",)}
     for k in overrides:
         t.used.add(k)
@@ -538,11 +549,25 @@ def load_world(scenario: str | Path | None) -> CanalWorld:
     return load_scenario(scenario).world
 
 
-def parse_scenario(text: str, source: str = "<string>", path: Path | None = None) -> Scenario:
+def parse_scenario(text: str, source: str = "<string>", path: Path | None = None,
+                   files: dict | None = None) -> Scenario:
+    """A scenario from the text of its file; `source` names it in errors, `files` holds the
+    texts of the parameter files it names (by the name it gives them; else read from disk)."""
+    return scenario_from_table(parse_toml(text, source), source, path, files)
+
+
+def parse_toml(text: str, source: str = "<string>") -> dict:
+    """The TOML document of a scenario file, or an InputError naming the file."""
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{source}: not valid TOML: {exc}") from None
+
+
+def scenario_from_table(data: dict, source: str = "<string>", path: Path | None = None,
+                        files: dict | None = None) -> Scenario:
+    """A scenario from a parsed TOML document (e.g. one a study changed key by key): every
+    check of `parse_scenario` applies, and errors name `source` and the field."""
     doc = _Table(data, "", source)
 
     meta = doc.table("scenario", required=True)
@@ -612,14 +637,14 @@ def parse_scenario(text: str, source: str = "<string>", path: Path | None = None
     sens.done()
 
     plant = doc.table("plant") or _Table({}, "plant", source)
-    plant_params = _params(plant.table("boat"), IDENTIFIED, source)
+    plant_params = _params(plant.table("boat"), IDENTIFIED, source, files)
     rates = (plant.number("dnT_max_pctps", 10.0, low=0), plant.number("dnS_max_pctps", 40.0, low=0))
     plant.done()
 
     ctrl = doc.table("controller") or _Table({}, "controller", source)
     controller = ctrl.string("type", "nmpc", choices=CONTROLLERS)
     d_p = ctrl.number("d_p_m", 2.0, low=0)
-    ctrl_params = _params(ctrl.table("boat"), IDENTIFIED, source)
+    ctrl_params = _params(ctrl.table("boat"), IDENTIFIED, source, files)
     options = _controller_options(ctrl.table("options") or _Table({}, "controller.options", source),
                                   controller, d_p, ctrl_params)
     ctrl.done()

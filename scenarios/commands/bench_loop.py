@@ -3,7 +3,10 @@
 Runs one scenario (default: the Pohang canal, NMPC, LiDAR and EKF in the loop) with the
 LiDAR in a worker process and in this process, alternately `--repeats` times, and prints one
 JSON object: real-time factor and per-step milliseconds of each part for both, the ratio of
-their wall times from the same run, and whether the two gave the same summary.
+their wall times from the same run, and whether the two gave the same summary. Beside the
+wall time, the CPU time of the run (this process and the perception worker's): on a shared
+machine the wall time grows with the other processes, the CPU time much less, so
+`cpu_real_time_factor` (simulated seconds per CPU second) compares builds across sessions.
 """
 
 from __future__ import annotations
@@ -43,8 +46,10 @@ def run(args) -> int:
         for k in range(args.repeats):
             for mode in ("worker", "serial") if k % 2 == 0 else ("serial", "worker"):
                 out = Path(tmp) / f"{mode}{k}"
+                cpu0 = _cpu_s()
                 r = run_scenario(scenario, out, plots=False,
                                  parallel_perception=mode == "worker")
+                r.timing["cpu_s"] = _cpu_s() - cpu0
                 results[mode].append(r.timing)
                 summaries[mode] = (out / "summary.json").read_text()
                 steps = r.summary["steps"]
@@ -60,6 +65,16 @@ def run(args) -> int:
     return 0
 
 
+def _cpu_s() -> float:
+    """CPU seconds of this process and of its finished children (the perception worker is
+    waited for when a run ends)."""
+    import resource
+
+    me = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+
+
 def _describe(timings: list, steps: int) -> dict:
     """Median real-time factor and per-step times (ms) of the runs of one mode."""
     def per_step_ms(seconds):
@@ -68,6 +83,9 @@ def _describe(timings: list, steps: int) -> dict:
     parts = timings[0]["where_the_time_goes_s"].keys()
     out = {"real_time_factor": round(statistics.median(t["real_time_factor"] for t in timings), 2),
            "wall_s": round(statistics.median(t["wall_time_s"] for t in timings), 2),
+           "cpu_s": round(statistics.median(t["cpu_s"] for t in timings), 2),
+           "cpu_real_time_factor": round(0.1 * steps / statistics.median(
+               t["cpu_s"] for t in timings), 2),
            "loop_ms_per_step": {p: per_step_ms([t["where_the_time_goes_s"][p] for t in timings])
                                 for p in parts}}
     if "perception" in timings[0]:

@@ -19,6 +19,30 @@ def seed_arg(text: str) -> int:
     return seed
 
 
+def _assignment(text: str):
+    """--set: PATH=VALUE, the value read as TOML (a bare word is a string)."""
+    from scenarios.studies.overrides import parse_assignment
+
+    try:
+        return parse_assignment(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def load_with_overrides(path: str, overrides):
+    """The scenario file with the --set overrides applied (each checked as in the file)."""
+    from scenarios.scenario_file import load_scenario
+
+    if not overrides:
+        return load_scenario(path)
+    from scenarios.studies.overrides import scenario_with_overrides
+
+    scenario = load_scenario(path)  # the file as it is must be valid too
+    text = Path(path).read_text(encoding="utf-8")
+    return scenario_with_overrides(text, str(path), overrides, path=scenario.path,
+                                   given_at=lambda p: f"--set {p}")
+
+
 def register(sub) -> None:
     p = sub.add_parser(
         "run", help="run a canal scenario in closed loop (FMU plant, simulated sensors)",
@@ -29,6 +53,9 @@ def register(sub) -> None:
     )
     p.add_argument("scenario", help="scenario file (TOML), e.g. scenarios/pohang.toml")
     p.add_argument("--controller", help="override the scenario's controller")
+    p.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", type=_assignment,
+                   help="change a scenario key by its dotted path, as a TOML value (e.g. "
+                   "--set current.east_mps=0.2 --set plant.boat.Nr=-2500); repeatable")
     p.add_argument("--out", default=None, help="output folder (default runs/<scenario>-<controller>)")
     p.add_argument("--seed", type=seed_arg, default=None,
                    help="noise seed, a whole number >= 0 (default: the scenario's)")
@@ -47,9 +74,8 @@ def register(sub) -> None:
 def run(args) -> int:
     from scenarios.loop.closed_loop import terminal_events, terminal_progress
     from scenarios.loop.runner import check_criteria, run_scenario
-    from scenarios.scenario_file import load_scenario
 
-    scenario = load_scenario(args.scenario)
+    scenario = load_with_overrides(args.scenario, args.set)
     if args.water is not None:
         from scenarios.loop.runner import with_water
 

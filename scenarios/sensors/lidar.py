@@ -465,11 +465,16 @@ class LidarSimulator:
         the inertial frame, e.g. other vessels at their pose now), rendered like the world's
         and as given (their `remove_at_s` is not consulted).
         """
-        return self.scan_labelled(pose, speed_mps, time_s, extra_obstacles).points
+        return self._scan(pose, speed_mps, time_s, extra_obstacles, labelled=False).points
 
     def scan_labelled(self, pose, speed_mps: float = 0.0, time_s: float | None = None,
                       extra_obstacles=()) -> LidarScan:
         """One merged scan with what each point hit (for tests, figures and benchmarks)."""
+        return self._scan(pose, speed_mps, time_s, extra_obstacles, labelled=True)
+
+    def _scan(self, pose, speed_mps, time_s, extra_obstacles, labelled: bool) -> LidarScan:
+        """The scan; the labels and sensors only if `labelled` (the points are the same
+        either way, and so is every draw of the generator)."""
         pose = np.asarray(pose, float).reshape(-1)
         if pose.shape != (3,) or not np.all(np.isfinite(pose)):
             raise InputError(f"lidar: pose must be three finite numbers (x, y, psi), got {pose}")
@@ -478,10 +483,12 @@ class LidarSimulator:
         spray = self._spray(speed_mps)
         n_spray = len(spray[1])
         t_all, label = self._distances(scene, *self._cast(scene, origins, pose[2]))
-        columns, labels, sensor = self._render(t_all, label, n_spray=n_spray)
+        columns, labels, sensor = self._render(t_all, label, n_spray=n_spray, labelled=labelled)
         if n_spray:
             columns[:, -n_spray:] = spray[0].T
         # (N, 3) view of the (3, N) buffer: no copy, and each coordinate is contiguous.
+        if not labelled:
+            return LidarScan(columns.T, None, None)
         return LidarScan(columns.T, np.concatenate([labels, spray[1]]),
                          np.concatenate([sensor, spray[2]]))
 
@@ -751,10 +758,10 @@ class LidarSimulator:
             t_all[idx[nearer]] = hit[nearer]
             label[idx[nearer]] = OBSTACLE
 
-    def _render(self, t_all, label, n_spray=0):
+    def _render(self, t_all, label, n_spray=0, labelled=True):
         """The scan from every beam's first-hit distance and label: beams within range,
         dropouts and speckle off the water, range noise, the points, the own hull's returns
-        (with room for the spray after them)."""
+        (with room for the spray after them); their labels and sensors if `labelled`."""
         beams = self._beams
         noise = self.config.noise
         rng = self.rng
@@ -795,6 +802,8 @@ class LidarSimulator:
         beams.hull_points.take(hull_keep, axis=1, out=hull)
         hull += beams.hull_unit.take(hull_keep, axis=1) * (
             self._normal(m) * f32(noise.range_sigma_m))
+        if not labelled:
+            return out, None, None
         return (out,
                 np.concatenate([lab, np.full(m, HULL, np.int8)]),
                 np.concatenate([beams.sensor[idx], beams.hull_sensor[hull_keep]]))

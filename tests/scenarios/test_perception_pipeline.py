@@ -116,6 +116,7 @@ def test_bench_loop_prints_both_modes_and_their_ratio(capsys):
         assert set(report[mode]["loop_ms_per_step"]) >= {"plant", "navigation", "perception",
                                                          "controller"}
         assert report[mode]["lidar_ms_per_step"]["lidar_scan"] > 0
+        assert report[mode]["cpu_s"] > 0 and report[mode]["cpu_real_time_factor"] > 0
     assert report["serial_over_worker_wall"] > 0
 
 
