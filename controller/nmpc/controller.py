@@ -173,8 +173,10 @@ class NmpcController:
         blind: perception has had no usable scan for too long (`perception.feed`); bias: the
         model error as a body-frame acceleration [b_u, b_v, b_r] (m/s^2, rad/s^2), added to
         the prediction model (`water_estimator` estimates it with the current); vessels:
-        tracks of other vessels (`perception.tracking.Track`), each avoided at every stage as
-        predicted from its track (`vessel_slots`).
+        tracks of other vessels (`perception.tracking.Track`), each moving one avoided at every
+        stage as predicted from its track (`vessel_slots`) and met by the rules of the road; a
+        track that is not moving (`moving` False) is an obstacle like a wall, its sides among
+        the segments, and takes neither a slot nor a rule.
         Where the segments leave no passage along the route, or when blind, the reference
         slows the boat to a stop short of it and holds (`passage`); `stats.waiting` says why.
         """
@@ -197,6 +199,7 @@ class NmpcController:
         if guess is not None:
             x[2] = float(unwrap_near(x[2], guess[self.ocp.state_index(0)][2]))
         segs = check_segments(segments)
+        vessels = tuple(v for v in vessels if getattr(v, "moving", True))
         s, d = self._path.frame(x[None, :2], self._progress_m,
                                 self._progress_m + self.search_ahead_m)  # the boat on the path
         stop = self._stop(float(s[0]), float(d[0]), x, segs, elapsed, bool(blind))

@@ -91,6 +91,6 @@ def _describe(timings: list, steps: int) -> dict:
     if "perception" in timings[0]:
         out["lidar_ms_per_step"] = {
             p: per_step_ms([t["perception"][f"{p}_s"] for t in timings])
-            for p in ("lidar_scan", "detection")}
+            for p in ("lidar_scan", "detection", "tracking")}
     out["solve_ms"] = timings[-1]["solve_ms"]
     return out

@@ -100,9 +100,12 @@ class EncounterWatch:
 class TrackingWatch:
     """How well the confirmed tracks followed the true vessels: each confirmed track is
     matched to the nearest true vessel (centre within `match_m`), position and velocity
-    errors are pooled; a moving track that matches none is a false vessel."""
+    errors are pooled; a moving track that matches none is a false vessel. A vessel is in view
+    from when a corner of its hull enters the detector's crop (|x|, |y| <= `visible_m` in the
+    boat's frame; what lies in between is not checked, so round a bend the delay counts
+    from before the first line of sight)."""
 
-    def __init__(self, vessels, match_m: float = 6.0, visible_m: float = 55.0):
+    def __init__(self, vessels, match_m: float = 6.0, visible_m: float = 60.0):
         self.vessels = tuple(vessels)
         self.match_m, self.visible_m = match_m, visible_m
         self._pos_err, self._vel_err = [], []
@@ -112,9 +115,13 @@ class TrackingWatch:
 
     def update(self, time_s: float, pose, tracks, dt: float) -> None:
         truth = [(v.pose_at(time_s), v.velocity_at(time_s)) for v in self.vessels]
-        for k, (vp, _) in enumerate(truth):
-            near = np.hypot(*(vp[:2] - np.asarray(pose[:2]))) <= self.visible_m
-            if near and self.first_visible[k] is None:
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        for k, v in enumerate(self.vessels):
+            if self.first_visible[k] is not None:
+                continue
+            d = v.outline_at(time_s) - np.asarray(pose[:2], float)
+            x, y = c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]
+            if np.any((np.abs(x) <= self.visible_m) & (np.abs(y) <= self.visible_m)):
                 self.first_visible[k] = time_s
         for tr in tracks:
             p = np.asarray(tr.position, float)

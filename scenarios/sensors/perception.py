@@ -32,11 +32,20 @@ class KnownWalls:
         self._vessels = tuple(world.vessels)
 
     def perceive(self, time_s, true_state, estimated_state):
-        """The known walls and, extended to other boats, the true vessels as tracks."""
+        """The known walls and, extended to other boats, the true vessels as tracks; a vessel
+        at rest is an obstacle like a wall (its hull's sides among the segments), as the
+        LiDAR tracker hands it on."""
         from controller.perception.feed import Percept
 
-        return Percept(self.segments(time_s, true_state, estimated_state),
-                       self.vessel_tracks(time_s, true_state))
+        segs = self.segments(time_s, true_state, estimated_state)
+        tracks = self.vessel_tracks(time_s, true_state)
+        still = [k for k, tr in enumerate(tracks) if not tr.moving]
+        if still:
+            rings = [self._vessels[tracks[k].id - 1].outline_at(time_s) for k in still]
+            a, b = polyline_legs([np.vstack([r, r[:1]]) for r in rings])
+            segs = np.vstack([segs, clip_segments_to_circle(a, b, np.asarray(true_state)[:2],
+                                                            self.range_m)])
+        return Percept(segs, tracks)
 
     def vessel_tracks(self, time_s, true_state) -> tuple:
         """The vessels within range, as tracks built from the truth."""
@@ -62,21 +71,49 @@ class KnownWalls:
 
 class LidarPerception:
     """The simulated three-LiDAR scan at the true pose and time (obstacles removed by then are
-    gone), detected into segments placed with the estimated pose (so navigation errors move
-    the segments, as on the real boat)."""
+    gone, vessels where they are), detected into segments placed with the estimated pose (so
+    navigation errors move the segments, as on the real boat); `perceive` also tracks the other
+    vessels in the same cloud (`controller.perception.tracking`) and hands the controller the
+    walls without the moving hulls, and the tracks. `tracking=False` turns tracking off."""
 
     name = "lidar"
 
-    def __init__(self, world: CanalWorld, seed: int = 0, config=None, detection=None):
+    def __init__(self, world: CanalWorld, seed: int = 0, config=None, detection=None,
+                 tracking=None):
         from controller.perception.detection import DEFAULT
         from scenarios.sensors.lidar import LidarSimulator
 
         self.simulator = LidarSimulator(world, config, seed=seed * 7919 + 3)
         self.detection = detection or DEFAULT
+        self.tracker = None
+        if tracking is not False:
+            from controller.perception.tracking import TrackerConfig, VesselTracker
+
+            self.tracker = VesselTracker(tracking or TrackerConfig(detection=self.detection))
         self.points_per_scan: list[int] = []
-        self.time_s = {"lidar_scan": 0.0, "detection": 0.0}  # wall time, summed over scans
+        self.time_s = {"lidar_scan": 0.0, "detection": 0.0, "tracking": 0.0}  # summed wall time
 
     def segments(self, time_s, true_state, estimated_state) -> np.ndarray:
+        """The detected segments of one scan (None: an empty scan); no tracking."""
+        return self._scan_detect(time_s, true_state, estimated_state)[1]
+
+    def perceive(self, time_s, true_state, estimated_state):
+        """One scan's static walls and vessel tracks (a `Percept`), or None for an empty scan
+        (the tracks are then predicted inside the tracker, and carried by the feed)."""
+        from controller.perception.feed import Percept
+
+        points, found = self._scan_detect(time_s, true_state, estimated_state)
+        if self.tracker is None:
+            return None if found is None else Percept(found)
+        t0 = time.perf_counter()
+        out = self.tracker.update(time_s, points if found is not None else None,
+                                  np.asarray(estimated_state, float)[:3], found)
+        self.time_s["tracking"] += time.perf_counter() - t0
+        if found is None:
+            return None
+        return Percept(out.static_segments, out.tracks)
+
+    def _scan_detect(self, time_s, true_state, estimated_state):
         from controller.perception.detection import detect_segments
 
         true_state = np.asarray(true_state, float)
@@ -88,8 +125,8 @@ class LidarPerception:
         t1 = time.perf_counter()
         self.points_per_scan.append(len(points))
         if not len(points):
-            return None  # an empty scan is a failed one (a working LiDAR sees its own hull)
+            return points, None  # an empty scan is a failed one (a LiDAR sees its own hull)
         found = detect_segments(points, np.asarray(estimated_state, float)[:3], self.detection)
         self.time_s["lidar_scan"] += t1 - t0
         self.time_s["detection"] += time.perf_counter() - t1
-        return found
+        return points, found

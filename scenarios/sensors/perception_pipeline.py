@@ -38,13 +38,13 @@ class DelayedLidarPerception:
     name = "lidar"
 
     def __init__(self, world, seed: int = 0, config=None, detection=None,
-                 parallel: bool | None = None):
+                 parallel: bool | None = None, tracking=None):
         self.parallel = (os.cpu_count() or 1) > 1 if parallel is None else bool(parallel)
         self.points_per_scan: list[int] = []
-        self.time_s = {"lidar_scan": 0.0, "detection": 0.0}
-        self._ready = None  # serial: (segments, points, timing) of the last request
-        self._requested = False
-        args = (world, seed, config, detection)
+        self.time_s = {"lidar_scan": 0.0, "detection": 0.0, "tracking": 0.0}
+        self._ready = None  # serial: (result, points, timing) of the last request
+        self._requested = None  # the method asked for last ("segments" or "perceive")
+        args = (world, seed, config, detection, tracking)
         if self.parallel:
             self._worker = _Worker(args)
             self._inner = None
@@ -54,9 +54,20 @@ class DelayedLidarPerception:
 
     def segments(self, time_s, true_state, estimated_state) -> np.ndarray:
         """The segments of the previous call's scan; scans this pose for the next call."""
-        request = (float(time_s), np.array(true_state, float), np.array(estimated_state, float))
-        if not self._requested:
+        return self._call("segments", time_s, true_state, estimated_state)
+
+    def perceive(self, time_s, true_state, estimated_state):
+        """The walls and vessel tracks (`Percept`) of the previous call's scan, as `segments`."""
+        return self._call("perceive", time_s, true_state, estimated_state)
+
+    def _call(self, method, time_s, true_state, estimated_state):
+        request = (method, float(time_s), np.array(true_state, float),
+                   np.array(estimated_state, float))
+        if self._requested is None:
             self._request(request)
+        elif self._requested != method:
+            raise RuntimeError(f"DelayedLidarPerception: {method}() after "
+                               f"{self._requested}() (use one of the two per run)")
         found = self._collect()
         self._request(request)
         return found
@@ -72,11 +83,11 @@ class DelayedLidarPerception:
         self.close()
 
     def _request(self, request) -> None:
-        self._requested = True
+        self._requested = request[0]
         if self._worker is not None:
             self._worker.send(request)
             return
-        found = self._inner.segments(*request)
+        found = getattr(self._inner, request[0])(*request[1:])
         self._ready = (found, self._inner.points_per_scan[-1], dict(self._inner.time_s))
 
     def _collect(self) -> np.ndarray:
@@ -156,7 +167,7 @@ def _stop(proc: subprocess.Popen) -> None:
 
 def _serve(inp, out) -> int:
     """The worker: build the perception from the first message, then answer each request
-    (time, true state, estimated state) with ("ok", segments, points, timing) or
+    (method, time, true state, estimated state) with ("ok", result, points, timing) or
     ("error", exception, traceback)."""
     args = pickle.load(inp)
     try:
@@ -174,7 +185,10 @@ def _serve(inp, out) -> int:
             reply = ("error", *failure)
         else:
             try:
-                found = perception.segments(*request)
+                method, *inputs = request
+                if method not in ("segments", "perceive"):
+                    raise ValueError(f"perception worker: no method {method!r}")
+                found = getattr(perception, method)(*inputs)
                 reply = ("ok", found, perception.points_per_scan[-1], dict(perception.time_s))
             except Exception as exc:
                 reply = ("error", exc, traceback.format_exc())
