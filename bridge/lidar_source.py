@@ -1,8 +1,8 @@
 """Where the bridge's point clouds come from: the simulated LiDAR, or recorded scans.
 
 A `LidarSource` returns one merged cloud in the body frame (x forward, y starboard, z down,
-origin on the waterline) for a time and pose, or None when it has nothing; the segments then
-come from `controller.perception.detect_segments` (see `segments`). A live driver can join
+origin on the waterline) for a time and pose, or None when it has nothing; the bridge hands
+it to `controller.perception.pipeline` (detection, vessel tracking, cleaning, gaps). A live driver can join
 later behind the same `scan` method.
 """
 
@@ -28,7 +28,9 @@ class LidarSource(Protocol):
 
 
 class SimLidarSource:
-    """The scenario's canal seen by the simulated LiDAR (scenarios.sensors.lidar) at the given pose.
+    """The scenario's canal seen by the simulated LiDAR (scenarios.sensors.lidar) at the given
+    pose and time: obstacles removed by then are gone, the scenario's vessels are where they
+    are on the run's clock (seconds since the bridge took control).
 
     On the bridge that pose is the autopilot's EKF estimate (the bridge knows no other), so
     the simulated walls sit where the boat believes it is: navigation errors do not shift the
@@ -47,7 +49,9 @@ class SimLidarSource:
     def scan(self, time_s: float, pose) -> np.ndarray:
         p = np.asarray(pose, float).reshape(-1)
         speed = float(p[3]) if len(p) > 3 else 0.0
-        return self.simulator.scan(p[:3], speed_mps=speed)
+        t = float(time_s)
+        return self.simulator.scan(p[:3], speed_mps=speed, time_s=t,
+                                   extra_obstacles=self.simulator.world.vessel_obstacles(t))
 
 
 def mount_transform(mount) -> tuple[np.ndarray, np.ndarray]:

@@ -300,6 +300,14 @@ class OnboardLoop:
         self._actuators = np.zeros(2)
         self._tty = bool(getattr(console, "isatty", lambda: False)())
         self._status_shown = False
+        from controller.perception.pipeline import ScanPipeline
+
+        self.perception = ScanPipeline()  # detection, vessel tracking, cleaning, gaps
+        import inspect
+
+        takes = inspect.signature(controller.step).parameters  # an older controller takes
+        self._takes = {"blind", "vessels"} & set(takes)  # neither blindness nor vessels
+        self._waiting = ""  # why the NMPC holds the boat ("way blocked", "blind"), if it does
 
     # -- the run ---------------------------------------------------------------------------
     def run(self) -> BridgeResult:
@@ -382,15 +390,17 @@ class OnboardLoop:
     def _step(self, t: float) -> str | None:
         """One control period; returns a fault that calls for the failsafe, else None."""
         from bridge.ekf_state import predict_vector
-        from bridge.lidar_source import segments as detect
 
         link = self.link
         state = link.state
         age, delay = link.state_age_s, link.link_delay_s
         pred = predict_vector(state.vector, age + delay)
-        segs = detect(self.lidar.scan(t, pred), pred)
+        view = self.perception.update(t, self.lidar.scan(t, pred), pred)
+        segs = view.segments
         t0 = time.perf_counter()
-        decision = self.controller.step(t, pred, self._actuators.copy(), segs)
+        extra = {k: v for k, v in (("blind", view.blind), ("vessels", view.tracks))
+                 if k in self._takes}
+        decision = self.controller.step(t, pred, self._actuators.copy(), segs, **extra)
         solve_ms = (time.perf_counter() - t0) * 1e3
         hb = link.heartbeat
         if not decision.ok:
@@ -400,15 +410,31 @@ class OnboardLoop:
             return f"controller failed: command {command.tolist()} is not a number"
         pwm = link.send_commands(*command)
         self._actuators = command
+        self._tell_waiting(t, str(decision.stats.get("waiting", "")))
         m = link.rc_mapping
         step = Step(t, state.time_boot_s, age, delay, state.vector, pred, command,
                     (pwm.get(m.throttle.channel), pwm.get(m.steering.channel)), segs,
                     nearest_segment_m(pred, segs), solve_ms, float(decision.slack_m),
-                    hb.mode, hb.armed, str(decision.status))
+                    hb.mode, hb.armed, str(decision.status), view=view,
+                    water=decision.stats.get("water"))
         self.log.step(step)
         self.steps += 1
         self._show(step)
         return None
+
+    def _tell_waiting(self, t: float, waiting: str) -> None:
+        """When the NMPC starts or stops holding the boat short of a blocked way (or blind),
+        say so once: the log, the console and the ground station (STATUSTEXT)."""
+        why = waiting.split(" at ")[0].split(":")[0]
+        if why == self._waiting:
+            return
+        self._waiting = why
+        text = f"waiting: {waiting}" if waiting else "the way is clear: going on"
+        hb = self.link.heartbeat
+        self.log.event(t, text, hb.mode if hb else "", hb.armed if hb else None)
+        self.link.statustext(f"canalnav: {text}",
+                             MAV_SEVERITY_WARNING if waiting else MAV_SEVERITY_INFO)
+        self._say(f"bridge: {text}")
 
     # -- stopping ------------------------------------------------------------------------------
     def _stop(self, reason: str, severity: int) -> None:

@@ -1,10 +1,12 @@
 """The bridge's per-step CSV log and its one-line console status, written as the run goes.
 
 `steps.csv` has a row per control step (time, reported and predicted state, commands, PWM
-sent, the measured one-way link delay and the state's age since the autopilot made it,
-status) and a row per event (failsafe, resume, goal) with the state columns
-empty; `segments.csv` the segments each step used. Both are flushed after every row, so a
-crash or a pulled plug loses nothing before it.
+sent, the measured one-way link delay and the state's age since the autopilot made it, the
+scan's age and blindness, the vessels tracked, the rows perception cleaned away, the water
+estimate, status) and a row per event (failsafe, resume, waiting, parameter change, goal)
+with the state columns empty; `segments.csv` the segments each step used, `tracks.csv` the
+vessel tracks (as `canalnav run` writes them). All are flushed after every row, so a crash or
+a pulled plug loses nothing before it.
 """
 
 from __future__ import annotations
@@ -21,7 +23,9 @@ STEP_COLUMNS = (
     ("time_s", "ekf_time_s", "state_age_s", "link_delay_s")
     + STATE + tuple(f"pred_{n}" for n in STATE)
     + ("nT_cmd_pct", "nS_cmd_pct", "throttle_pwm_us", "steering_pwm_us", "segments",
-       "nearest_segment_m", "solve_ms", "slack_m", "mode", "armed", "status")
+       "nearest_segment_m", "scan_age_s", "blind", "tracks", "segments_cleaned",
+       "current_n_mps", "current_e_mps", "bias_u_mps2", "bias_v_mps2", "bias_r_radps2",
+       "solve_ms", "slack_m", "mode", "armed", "status")
 )
 SEGMENT_COLUMNS = ("time_s", "x_c_m", "y_c_m", "theta_rad", "length_m")
 
@@ -45,6 +49,8 @@ class Step:
     mode: str
     armed: bool
     status: str
+    view: object = None  # controller.perception.feed.PerceptionView of this step
+    water: object = None  # controller.water_estimator.WaterEstimate of this step
 
 
 class StepLog:
@@ -53,16 +59,20 @@ class StepLog:
     def __init__(self, folder: Path | None):
         self._files = []
         if folder is None:
-            self._w = self._sw = None
+            self._w = self._sw = self._tw = None
             return
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
+        from scenarios.loop.run_log import TRACK_COLUMNS
+
         fh = (folder / "steps.csv").open("w", newline="")
         sfh = (folder / "segments.csv").open("w", newline="")
-        self._files = [fh, sfh]
-        self._w, self._sw = csv.writer(fh), csv.writer(sfh)
+        tfh = (folder / "tracks.csv").open("w", newline="")
+        self._files = [fh, sfh, tfh]
+        self._w, self._sw, self._tw = csv.writer(fh), csv.writer(sfh), csv.writer(tfh)
         self._w.writerow(STEP_COLUMNS)
         self._sw.writerow(SEGMENT_COLUMNS)
+        self._tw.writerow(TRACK_COLUMNS)
         self._flush()
 
     def step(self, s: Step) -> None:
@@ -72,11 +82,25 @@ class StepLog:
                 *s.command]
         row = [_num(v) for v in nums]
         row += ["" if p is None else int(p) for p in s.pwm]
-        row += [len(s.segments), _num(s.nearest_segment_m), f"{s.solve_ms:.3f}", _num(s.slack_m),
-                s.mode, int(s.armed), s.status]
+        row += [len(s.segments), _num(s.nearest_segment_m)]
+        view = s.view
+        if view is None:
+            row += ["", "", "", ""]
+        else:
+            row += [_num(view.age_s), int(view.blind), len(view.tracks), sum(view.dropped.values())]
+        if s.water is None:
+            row += [""] * 5
+        else:
+            row += [_num(v) for v in (*s.water.current_ne, *s.water.bias)]
+        row += [f"{s.solve_ms:.3f}", _num(s.slack_m), s.mode, int(s.armed), s.status]
         self._w.writerow(row)
         for seg in np.asarray(s.segments, float).reshape(-1, 4):
             self._sw.writerow([_num(s.time_s), *(_num(v) for v in seg)])
+        if view is not None and view.tracks:
+            from scenarios.loop.run_log import track_row
+
+            for tr in view.tracks:
+                self._tw.writerow(track_row(s.time_s, tr))
         self._flush()
 
     def event(self, time_s: float, status: str, mode: str = "", armed: bool | None = None) -> None:
@@ -96,7 +120,7 @@ class StepLog:
         for fh in self._files:
             fh.close()
         self._files = []
-        self._w = self._sw = None
+        self._w = self._sw = self._tw = None
 
 
 def _num(v) -> str:
@@ -106,10 +130,16 @@ def _num(v) -> str:
 
 def status_line(s: Step) -> str:
     """One console line: time, mode, arming, position, speed, commands, nearest wall, the
-    measured link delay and the state's age (since the autopilot made it)."""
+    measured link delay and the state's age (since the autopilot made it), the vessels
+    tracked, the water estimate, blindness."""
     x, y, psi, u, v, _ = s.state
     near = f"{s.nearest_segment_m:5.1f} m" if math.isfinite(s.nearest_segment_m) else "  --   "
+    extra = ""
+    if s.view is not None:
+        extra += f"  boats {len(s.view.tracks)}" + ("  BLIND" if s.view.blind else "")
+    if s.water is not None:
+        extra += f"  current {math.hypot(*s.water.current_ne):4.2f} m/s"
     return (f"t {s.time_s:7.1f} s  {s.mode:<8} {'ARMED' if s.armed else 'disarmed':<8} "
             f"x {x:8.1f} y {y:8.1f} hdg {math.degrees(psi) % 360:5.1f}  {math.hypot(u, v):4.2f} m/s  "
             f"nT {s.command[0]:6.1f} nS {s.command[1]:6.1f} %  wall {near}  "
-            f"delay {s.link_delay_s * 1e3:4.0f} ms  age {s.state_age_s * 1e3:4.0f} ms  {s.status}")
+            f"delay {s.link_delay_s * 1e3:4.0f} ms  age {s.state_age_s * 1e3:4.0f} ms{extra}  {s.status}")

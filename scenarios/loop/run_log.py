@@ -30,6 +30,15 @@ TRACK_COLUMNS = ("time_s", "id", "x_m", "y_m", "v_north_mps", "v_east_mps", "hea
 VESSEL_COLUMNS = ("time_s", "name", "x_m", "y_m", "psi_rad")
 
 
+def track_row(t: float, tr) -> list:
+    """One tracks.csv row (TRACK_COLUMNS) for a track at time `t`."""
+    cov = np.asarray(tr.covariance, float).reshape(4, 4)
+    return [f"{t:.3f}", tr.id, *(repr(float(v)) for v in (
+        *tr.position, *tr.velocity, tr.heading_rad, tr.length_m, tr.width_m)),
+        int(bool(getattr(tr, "moving", True))),
+        repr(float(np.sqrt(max(0.5 * (cov[0, 0] + cov[1, 1]), 0.0))))]
+
+
 class RunLog:
     """Context manager writing log.csv and segments.csv line by line."""
 
@@ -87,11 +96,7 @@ class RunLog:
             self._tw[0].writerow(TRACK_COLUMNS)
             self._tw[1].writerow(VESSEL_COLUMNS)
         for tr in tracks:
-            cov = np.asarray(tr.covariance, float).reshape(4, 4)
-            self._tw[0].writerow([f"{t:.3f}", tr.id, *(repr(float(v)) for v in (
-                *tr.position, *tr.velocity, tr.heading_rad, tr.length_m, tr.width_m)),
-                int(bool(getattr(tr, "moving", True))),
-                repr(float(np.sqrt(max(0.5 * (cov[0, 0] + cov[1, 1]), 0.0))))])
+            self._tw[0].writerow(track_row(t, tr))
         for name, pose in vessels:
             self._tw[1].writerow([f"{t:.3f}", name, *(repr(float(v)) for v in pose)])
         for f in self._tracks:

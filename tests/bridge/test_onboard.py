@@ -385,3 +385,68 @@ def test_frames_that_disagree_are_refused_and_a_missing_origin_is_a_note(make_au
     result, console = run_loop(ap2, vclock, scenario, StubController())
     assert result.exit_code == EXIT_GOAL
     assert "note: no GPS_GLOBAL_ORIGIN within 5 s" in console
+
+
+def test_a_blocked_way_is_a_hold_told_to_the_ground_station(make_autopilot, vclock, tmp_path):
+    """The barge of blocked.toml 9 m ahead of a boat at rest: the NMPC holds the boat and
+    the bridge says so once, in its log and as STATUSTEXT, and keeps control (no failsafe)."""
+    from bridge.lidar_source import SimLidarSource
+    from scenarios.loop.controllers import NmpcController
+
+    scenario = load_scenario(ROOT / "scenarios" / "blocked.toml")
+    ap = make_autopilot(state=(131.0, 0.0, 0.0, 0.0, 0.0, 0.0))  # about where it should stop
+    result, console = run_loop(ap, vclock, scenario, NmpcController(scenario), log_dir=tmp_path,
+                               lidar=SimLidarSource(scenario), duration_s=3.0)
+    assert result.exit_code == EXIT_STOPPED and result.failsafes == []
+    texts = [e for e in events(ap) if e.startswith("text: canalnav: waiting")]
+    assert len(texts) == 1 and "way blocked" in texts[0], events(ap)
+    rows = read_steps(tmp_path)
+    said = [r["status"] for r in rows if not r["x_m"] and r["status"].startswith("waiting")]
+    assert len(said) == 1 and "way blocked" in said[0]
+    driven = [r for r in rows if r["x_m"]]
+    assert max(abs(float(r["nT_cmd_pct"])) for r in driven[-10:]) < 5.0  # no drive at it
+    assert all(r["current_n_mps"] for r in driven)  # the water estimate is logged each step
+    assert "way blocked" in console
+
+
+def test_vessels_are_tracked_on_the_bridge_and_logged(make_autopilot, vclock, tmp_path):
+    """A boat coming the other way in the simulated LiDAR: the bridge's perception tracks it,
+    hands the NMPC the track, and writes it to tracks.csv as it goes."""
+    from bridge.lidar_source import SimLidarSource
+    from scenarios.loop.controllers import NmpcController
+    from scenarios.scenario_file import parse_scenario
+
+    text = (ROOT / "scenarios" / "straight.toml").read_text() + """
+[[vessel]]
+name = "tour boat"
+[vessel.hull]
+length_m = 10.0
+beam_m = 3.0
+height_m = 2.0
+[vessel.route]
+waypoints = [[60, -4], [0, -4]]
+speed_mps = 2.0
+"""
+    scenario = parse_scenario(text, "straight+vessel.toml")
+    ap = make_autopilot(state=tuple(scenario.initial_state))
+    seen = []
+    core = NmpcController(scenario)
+
+    class Watching:
+        name = "nmpc"
+
+        def step(self, time_s, state, actuators, segments, blind=False, vessels=()):
+            seen.append(tuple(vessels))
+            return core.step(time_s, state, actuators, segments, blind=blind, vessels=vessels)
+
+    result, _ = run_loop(ap, vclock, scenario, Watching(), log_dir=tmp_path,
+                         lidar=SimLidarSource(scenario), duration_s=4.0)
+    assert result.exit_code == EXIT_STOPPED and result.failsafes == []
+    assert seen and len(seen[-1]) == 1
+    tr = seen[-1][0]
+    assert tr.moving and tr.velocity[0] == pytest.approx(-2.0, abs=0.4)
+    with open(tmp_path / "tracks.csv") as fh:
+        tracks = list(csv.DictReader(fh))
+    assert tracks and {r["id"] for r in tracks} == {str(tr.id)}
+    rows = [r for r in read_steps(tmp_path) if r["x_m"]]
+    assert int(rows[-1]["tracks"]) == 1 and rows[-1]["blind"] == "0"
