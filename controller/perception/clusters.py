@@ -24,12 +24,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-if TYPE_CHECKING:  # (the tracker's config holds the thresholds; no import at run time)
-    from .tracking import TrackerConfig
+# `cfg` below is a `tracking.TrackerConfig` (it holds the thresholds); not imported, so that
+# the tracker uses this module and not the other way round.
 
 
 @dataclass(frozen=True, eq=False)
