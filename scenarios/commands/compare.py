@@ -10,7 +10,8 @@ def register(sub) -> None:
         "compare", help="run the NMPC and the paper's two baselines on one scenario",
         description="Runs nmpc, los-pid (baseline 1: NMPC planner at 1 Hz + LOS-PID) and "
         "lexicographic (baseline 2: the paper's Appendix planner + LOS-PID) on the same "
-        "scenario and seed. Each run writes its own summary.json under DIR/<controller>; "
+        "scenario and seed. Each run writes its own summary.json (and run.mcap, see canalnav "
+        "run) under DIR/<controller>; "
         "DIR gets compare.md, compare.json and one separation plot of all three.",
     )
     p.add_argument("scenario", help="scenario file (TOML)")
@@ -19,6 +20,9 @@ def register(sub) -> None:
     p.add_argument("--controllers", default="nmpc,los-pid,lexicographic",
                    help="comma-separated controllers to compare")
     p.add_argument("--plant", default="fmu", help="plant: fmu (default) or python-model")
+    from scenarios.commands.run import add_viz_arguments
+
+    add_viz_arguments(p, live=False)
     p.set_defaults(func=run)
 
 
@@ -33,8 +37,12 @@ def run(args) -> int:
     for name in names:
         if name not in CONTROLLERS:
             raise InputError(f"--controllers: unknown controller {name!r} (choose from {', '.join(CONTROLLERS)})")
+    from scenarios.commands.run import viz_request
+
+    viz_request(args)
     out = Path(args.out or f"runs/compare-{scenario.name}")
-    rows = compare(scenario, out, names, seed=args.seed, plant=args.plant)
+    rows = compare(scenario, out, names, seed=args.seed, plant=args.plant, mcap=args.mcap,
+                   cloud_points=args.mcap_points)
     print(text_table(rows))
     print(f"\nwrote {out}/compare.md, {out}/compare.json, {out}/separation.png and one folder per controller")
     return 0

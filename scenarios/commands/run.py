@@ -43,13 +43,34 @@ def load_with_overrides(path: str, overrides):
                                    given_at=lambda p: f"--set {p}")
 
 
+def add_viz_arguments(p, live: bool = True) -> None:
+    """--mcap/--no-mcap, --mcap-points and (for a single run) --live."""
+    from scenarios.results.mcap_log import DEFAULT_CLOUD_POINTS, cloud_points_arg
+
+    p.add_argument("--mcap", action=argparse.BooleanOptionalAction, default=None,
+                   help="write run.mcap (Foxglove's schemas: frames, LiDAR cloud, walls, "
+                   "segments, plan, hull circles, tracks, GPS fix, per-step figures); default: "
+                   "when the viz extra is installed (pip install 'canalnav[viz]'), which --mcap "
+                   "then requires")
+    p.add_argument("--mcap-points", type=cloud_points_arg, default=DEFAULT_CLOUD_POINTS,
+                   metavar="N", help="LiDAR points kept per scan for run.mcap and --live, "
+                   f"every k-th (default {DEFAULT_CLOUD_POINTS}; 0: no cloud)")
+    if live:
+        p.add_argument("--live", metavar="[HOST:]PORT",
+                       help="serve the run live to Foxglove (Foxglove WebSocket, "
+                       "ws://HOST:PORT) with the channels of run.mcap; HOST is 127.0.0.1 "
+                       "(this machine only) unless given, e.g. 0.0.0.0:8765 for the network. "
+                       "Needs the viz extra")
+
+
 def register(sub) -> None:
     p = sub.add_parser(
         "run", help="run a canal scenario in closed loop (FMU plant, simulated sensors)",
         description="Run a scenario: the boat FMU as plant, GPS/AHRS into an EKF, LiDAR "
         "detections (or known walls) into the controller at 10 Hz. Writes log.csv (as it "
-        "goes), summary.json, timing.json and PNG plots to --out. Exits 0 when the goal is "
-        "reached and every pass criterion holds, else 1.",
+        "goes), summary.json, timing.json and PNG plots to --out, and run.mcap for Foxglove "
+        "when the viz extra is installed (pip install 'canalnav[viz]'). Exits 0 when the goal "
+        "is reached and every pass criterion holds, else 1.",
     )
     p.add_argument("scenario", help="scenario file (TOML), e.g. scenarios/pohang.toml")
     p.add_argument("--controller", help="override the scenario's controller")
@@ -65,6 +86,7 @@ def register(sub) -> None:
                    help="what the NMPC knows of the current and its model's error: the on-line "
                    "estimate, nothing, or the scenario's true current (default: the "
                    "scenario's [controller.options] water, else estimated)")
+    add_viz_arguments(p)
     p.add_argument("--serial-perception", action="store_true",
                    help="scan and detect in this process, not in a worker on another core "
                    "(same results, more wall time)")
@@ -83,10 +105,12 @@ def run(args) -> int:
     controller = args.controller or scenario.controller
     out = Path(args.out or f"runs/{scenario.name}-{controller}")
     progress = terminal_progress() if sys.stderr.isatty() else None
+    live = viz_request(args)
     result = run_scenario(scenario, out, controller=controller, seed=args.seed,
                           plant=args.plant, plots=not args.no_plots, progress=progress,
                           parallel_perception=False if args.serial_perception else None,
-                          events=terminal_events(progress is not None))
+                          events=terminal_events(progress is not None), mcap=args.mcap,
+                          live=live, cloud_points=args.mcap_points)
     if progress:
         sys.stderr.write("\n")
     s, t = result.summary, result.timing
@@ -101,9 +125,25 @@ def run(args) -> int:
     return 0 if s["reached_goal"] and not failed else 1
 
 
+def viz_request(args):
+    """--live as (host, port) (None without it); the viz extra checked for --live and --mcap,
+    and a note on stderr when run.mcap is skipped by default for want of it."""
+    from scenarios.results.foxglove_messages import VIZ_EXTRA, require_viz, viz_available
+    from scenarios.results.mcap_log import parse_live
+
+    live = parse_live(args.live) if getattr(args, "live", None) else None
+    if live is not None or args.mcap:
+        require_viz()
+    elif args.mcap is None and not viz_available():
+        print(f"note: run.mcap not written: the Foxglove SDK is not installed ({VIZ_EXTRA})",
+              file=sys.stderr)
+    return live
+
+
 def _written(out: Path, args) -> list[str]:
     """The files this run writes into `out` (plots only when asked for), that exist."""
-    names = ["summary.json", "timing.json", "log.csv", "segments.csv", "snapshots.json"]
+    names = ["summary.json", "timing.json", "log.csv", "segments.csv", "snapshots.json",
+             "tracks.csv", "vessels.csv", "run.mcap"]
     if args.plant == "mavlink-sim":
         names.append("mavlink.tlog")
     if not args.no_plots:

@@ -115,9 +115,12 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
                     state0, cfg: LoopConfig, out_dir: Path,
                     progress: Callable[[float, float], None] | None = None,
                     scenario_name: str = "",
-                    events: Callable[[float, str], None] | None = None) -> RunResult:
+                    events: Callable[[float, str], None] | None = None,
+                    viz=None) -> RunResult:
     """Run one scenario to the goal, the time limit, or a controller failure. `events(t,
-    text)` hears when the controller starts and stops waiting (a blocked way, blindness)."""
+    text)` hears when the controller starts and stops waiting (a blocked way, blindness).
+    `viz` (a `scenarios.results.mcap_log.LoopViz`) hears every step for run.mcap and the live
+    view; it only reads, so the results are the same without it."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     timer = _Timer()
@@ -208,6 +211,13 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
                 t, out.state, est, command, rate, out.actuators, clear, xt,
                 (t2 - t1) * 1e3, decision, segs, width, view, true_current,
             )
+            if viz is not None:
+                tv = time.perf_counter()
+                viz.step(t, out.state, est, outlines, segs, decision, view, command, rate,
+                         out.actuators, clear, xt, (t2 - t1) * 1e3,
+                         cloud=getattr(perception, "last_cloud", None),
+                         vessels=[(v.name, v.outline_at(t)) for v in cfg.vessels])
+                timer.add("viz", time.perf_counter() - tv)
             water = decision.stats.get("water")
             if water is not None:
                 rows_water.append((t, *true_current, *water.current_ne, out.state[3]))
@@ -238,7 +248,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
             if varying:
                 plant.set_current(true_current)
             try:
-                for _ in range(n_imu):
+                for i in range(n_imu):
                     ta = time.perf_counter()
                     out = plant.step(command, cfg.imu_period_s)
                     tb = time.perf_counter()
@@ -252,6 +262,8 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
                     if imu_k % gps_every == 0:
                         fix = gps.measure(out.state)
                         nav.update_gps(fix.position_ne, fix.velocity_ne)
+                        if viz is not None:
+                            viz.gps_fix(t + (i + 1) * cfg.imu_period_s, fix.position_ne)
                     timer.add("navigation", time.perf_counter() - tb)
             except PlantFailure as exc:  # e.g. a lost MAVLink link: what was logged stays
                 status = f"plant failed: {exc}"

@@ -35,9 +35,10 @@ PLANTS: dict[str, Callable] = {"fmu": _fmu_plant, "python-model": _model_plant}
 """Plant factories by name: f(scenario, out_dir) -> Plant."""
 
 
-def make_perception(scenario: Scenario, parallel: bool | None = None):
+def make_perception(scenario: Scenario, parallel: bool | None = None, cloud_points: int = 0):
     """Known walls, or the simulated LiDAR and detection one control period behind the
-    controller (in a worker process if `parallel`; None: when there is a second core)."""
+    controller (in a worker process if `parallel`; None: when there is a second core);
+    `cloud_points` > 0 carries each scan's cloud, decimated, back for the viewer."""
     if scenario.perception == "known-walls":
         from scenarios.sensors.perception import KnownWalls
 
@@ -47,7 +48,7 @@ def make_perception(scenario: Scenario, parallel: bool | None = None):
 
     return DelayedLidarPerception(scenario.world, seed=scenario.seed,
                                   config=LidarConfig(noise=scenario.lidar_noise),
-                                  parallel=parallel)
+                                  parallel=parallel, cloud_points=cloud_points)
 
 
 def make_controller(scenario: Scenario, name: str | None = None):
@@ -122,10 +123,14 @@ def with_water(scenario: Scenario, water: str) -> Scenario:
 def run_scenario(scenario: Scenario, out_dir: Path, controller: str | None = None,
                  seed: int | None = None, plant: str = "fmu", plots: bool = True,
                  progress=None, parallel_perception: bool | None = None,
-                 events=None) -> RunResult:
-    """Run one scenario into `out_dir` (log.csv, summary.json, timing.json, PNG plots).
-    `parallel_perception` changes the wall time only, never the results; `events(t, text)`
-    hears when the controller starts or stops waiting."""
+                 events=None, mcap: bool | None = None, live=None,
+                 cloud_points: int | None = None) -> RunResult:
+    """Run one scenario into `out_dir` (log.csv, summary.json, timing.json, PNG plots, and
+    run.mcap). `parallel_perception` changes the wall time only, never the results;
+    `events(t, text)` hears when the controller starts or stops waiting. `mcap`: write
+    run.mcap (None: when the viz extra is installed; True without it: InputError naming it);
+    `live` (host, port): serve the run to Foxglove over WebSocket; `cloud_points`: points per
+    LiDAR cloud in both (0: none). None of these changes the results."""
     if plant not in PLANTS:
         raise InputError(f"plant {plant!r} is not available (choose from: {', '.join(PLANTS)})")
     if scenario.current_profile is not None and plant not in ("fmu", "python-model"):
@@ -140,20 +145,30 @@ def run_scenario(scenario: Scenario, out_dir: Path, controller: str | None = Non
 
         scenario = replace(scenario, seed=seed)
     ctrl = make_controller(scenario, controller)
-    perception = make_perception(scenario, parallel_perception)
+    cfg = loop_config(scenario, seed)
+    viz = _loop_viz(scenario, cfg, out_dir, mcap, live, cloud_points)
+    if viz is not None and viz.live_url and events is not None:
+        events(0.0, f"live view for Foxglove on {viz.live_url}")
+    points = viz.log.options.cloud_points if viz is not None else 0
+    try:
+        perception = make_perception(scenario, parallel_perception, points)
+    except BaseException:
+        _close(viz)
+        raise
     try:
         the_plant = PLANTS[plant](scenario, out_dir)
     except BaseException:
         _close(perception)
+        _close(viz)
         raise
-    cfg = loop_config(scenario, seed)
     try:
         result = run_closed_loop(the_plant, ctrl, perception, scenario.initial_state, cfg,
                                  out_dir, progress=progress, scenario_name=scenario.name,
-                                 events=events)
+                                 events=events, viz=viz)
     finally:
         the_plant.close()
         _close(perception)
+        _close(viz)
     if plots:
         from scenarios.results import plots as p
 
@@ -166,11 +181,39 @@ def run_scenario(scenario: Scenario, out_dir: Path, controller: str | None = Non
     return result
 
 
-def _close(perception) -> None:
-    close = getattr(perception, "close", None)
+def _close(thing) -> None:
+    close = getattr(thing, "close", None)
     if close is not None:
         close()
 
+
+def _loop_viz(scenario: Scenario, cfg: LoopConfig, out_dir: Path, mcap, live, cloud_points):
+    """The run's MCAP log and live view (`LoopViz`), or None when neither is wanted (or
+    run.mcap by default, and the viz extra is not installed). A stale run.mcap of an earlier
+    run in the folder is removed when none is written."""
+    from scenarios.results.foxglove_messages import require_viz, viz_available
+
+    target = out_dir / "run.mcap"
+    if mcap is None:
+        mcap = viz_available()
+    if not mcap:
+        target.unlink(missing_ok=True)
+    if not mcap and live is None:
+        return None
+    require_viz()
+    from scenarios.results.mcap_log import DEFAULT_CLOUD_POINTS, LoopViz, VizOptions
+
+    lidar = None
+    if scenario.perception != "known-walls":
+        from scenarios.sensors.lidar import LidarConfig
+
+        lidar = LidarConfig().mounts
+    options = VizOptions(mcap_path=target if mcap else None, live=live,
+                         cloud_points=DEFAULT_CLOUD_POINTS if cloud_points is None
+                         else int(cloud_points))
+    return LoopViz(options, lidar_mounts=lidar or (), origin=scenario.geodetic_origin,
+                   hull_radius_m=R_B_M, separation_m=cfg.desired_separation_m,
+                   gps_sigma_m=cfg.gps.pos_sigma_m, n_walls=len(scenario.world.walls))
 
 def _default_snapshots(scenario: Scenario) -> tuple:
     """Four instants spread over the expected run time."""

@@ -74,12 +74,14 @@ class LidarPerception:
     gone, vessels where they are), detected into segments placed with the estimated pose (so
     navigation errors move the segments, as on the real boat); `perceive` also tracks the other
     vessels in the same cloud (`controller.perception.tracking`) and hands the controller the
-    walls without the moving hulls, and the tracks. `tracking=False` turns tracking off."""
+    walls without the moving hulls, and the tracks. `tracking=False` turns tracking off.
+    `cloud_points` > 0 keeps every scan's cloud, decimated to at most that many points, as
+    `last_cloud` = (scan time, (N, 3) float32 body frame) for a viewer (None: not kept)."""
 
     name = "lidar"
 
     def __init__(self, world: CanalWorld, seed: int = 0, config=None, detection=None,
-                 tracking=None):
+                 tracking=None, cloud_points: int = 0):
         from controller.perception.detection import DEFAULT
         from scenarios.sensors.lidar import LidarSimulator
 
@@ -92,6 +94,8 @@ class LidarPerception:
             self.tracker = VesselTracker(tracking or TrackerConfig(detection=self.detection))
         self.points_per_scan: list[int] = []
         self.time_s = {"lidar_scan": 0.0, "detection": 0.0, "tracking": 0.0}  # summed wall time
+        self.cloud_points = int(cloud_points)
+        self.last_cloud = None
 
     def segments(self, time_s, true_state, estimated_state) -> np.ndarray:
         """The detected segments of one scan (None: an empty scan); no tracking."""
@@ -124,6 +128,10 @@ class LidarPerception:
                                      extra_obstacles=vessels)
         t1 = time.perf_counter()
         self.points_per_scan.append(len(points))
+        if self.cloud_points > 0:
+            from scenarios.results.foxglove_messages import decimate
+
+            self.last_cloud = (at, decimate(points, self.cloud_points))
         if not len(points):
             return points, None  # an empty scan is a failed one (a LiDAR sees its own hull)
         found = detect_segments(points, np.asarray(estimated_state, float)[:3], self.detection)

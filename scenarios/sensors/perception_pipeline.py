@@ -33,18 +33,20 @@ class PerceptionWorkerError(RuntimeError):
 
 class DelayedLidarPerception:
     """`LidarPerception` with a one-period latency; `parallel` runs it in a worker process
-    (default: when the machine has more than one core)."""
+    (default: when the machine has more than one core). `cloud_points` > 0: `last_cloud` is
+    the decimated cloud of the scan whose result the last call returned (see LidarPerception)."""
 
     name = "lidar"
 
     def __init__(self, world, seed: int = 0, config=None, detection=None,
-                 parallel: bool | None = None, tracking=None):
+                 parallel: bool | None = None, tracking=None, cloud_points: int = 0):
         self.parallel = (os.cpu_count() or 1) > 1 if parallel is None else bool(parallel)
         self.points_per_scan: list[int] = []
         self.time_s = {"lidar_scan": 0.0, "detection": 0.0, "tracking": 0.0}
         self._ready = None  # serial: (result, points, timing) of the last request
         self._requested = None  # the method asked for last ("segments" or "perceive")
-        args = (world, seed, config, detection, tracking)
+        self.last_cloud = None
+        args = (world, seed, config, detection, tracking, cloud_points)
         if self.parallel:
             self._worker = _Worker(args)
             self._inner = None
@@ -88,14 +90,16 @@ class DelayedLidarPerception:
             self._worker.send(request)
             return
         found = getattr(self._inner, request[0])(*request[1:])
-        self._ready = (found, self._inner.points_per_scan[-1], dict(self._inner.time_s))
+        self._ready = (found, self._inner.points_per_scan[-1], dict(self._inner.time_s),
+                       self._inner.last_cloud)
 
     def _collect(self) -> np.ndarray:
         if self._worker is None:
-            found, n_points, time_s = self._ready
+            found, n_points, time_s, cloud = self._ready
         else:
-            found, n_points, time_s = self._worker.receive()
+            found, n_points, time_s, cloud = self._worker.receive()
         self.points_per_scan.append(n_points)
+        self.last_cloud = cloud
         self.time_s = time_s
         return found
 
@@ -167,8 +171,8 @@ def _stop(proc: subprocess.Popen) -> None:
 
 def _serve(inp, out) -> int:
     """The worker: build the perception from the first message, then answer each request
-    (method, time, true state, estimated state) with ("ok", result, points, timing) or
-    ("error", exception, traceback)."""
+    (method, time, true state, estimated state) with ("ok", result, points, timing, cloud)
+    or ("error", exception, traceback); the cloud is None unless it was asked to keep it."""
     args = pickle.load(inp)
     try:
         perception, failure = LidarPerception(*args), None
@@ -189,7 +193,8 @@ def _serve(inp, out) -> int:
                 if method not in ("segments", "perceive"):
                     raise ValueError(f"perception worker: no method {method!r}")
                 found = getattr(perception, method)(*inputs)
-                reply = ("ok", found, perception.points_per_scan[-1], dict(perception.time_s))
+                reply = ("ok", found, perception.points_per_scan[-1], dict(perception.time_s),
+                         perception.last_cloud)
             except Exception as exc:
                 reply = ("error", exc, traceback.format_exc())
         try:

@@ -24,14 +24,17 @@ COLUMNS = (
 
 
 def compare(scenario: Scenario, out_dir: Path, controllers=COMPARED, seed: int | None = None,
-            plant: str = "fmu", progress=None) -> list[dict]:
-    """Run each controller into out_dir/<controller>; return one row of figures per run."""
+            plant: str = "fmu", progress=None, mcap: bool | None = None,
+            cloud_points: int | None = None) -> list[dict]:
+    """Run each controller into out_dir/<controller> (each with its run.mcap, see
+    `run_scenario`); return one row of figures per run."""
     out_dir = Path(out_dir)
     rows, runs = [], {}
     for name in controllers:
         run_dir = out_dir / name
         result = run_scenario(scenario, run_dir, controller=name, seed=seed, plant=plant,
-                              progress=progress(name) if progress else None)
+                              progress=progress(name) if progress else None, mcap=mcap,
+                              cloud_points=cloud_points)
         s, t = result.summary, result.timing
         rows.append({**s, "solve_mean_ms": t["solve_ms"]["mean"], "solve_max_ms": t["solve_ms"]["max"]})
         runs[s["controller"]] = run_dir

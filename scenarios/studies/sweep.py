@@ -73,7 +73,8 @@ def execute_run(spec: RunSpec) -> dict:
                                                spec.overrides, dict(spec.files),
                                                path=Path(spec.scenario_file))
             result = run_scenario(scenario, out, controller=spec.controller, seed=spec.seed,
-                                  plant=spec.plant, plots=spec.plots, parallel_perception=False)
+                                  plant=spec.plant, plots=spec.plots, parallel_perception=False,
+                                  mcap=False)  # a study gathers figures, not recordings
             row.update(summary_row(result.summary, result.timing,
                                    check_criteria(scenario, result.summary)))
         except Exception as exc:  # a study records what a run raised, whatever it was
