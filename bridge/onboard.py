@@ -65,6 +65,9 @@ class BridgeOptions:
     stream_rate_hz: float = 20.0
     control_period_s: float = 0.1
     seed: int | None = None  # simulated LiDAR noise (default: the scenario's seed)
+    mcap: bool | None = None  # run.mcap in log_dir (None: when the viz extra is installed)
+    live: tuple | None = None  # (host, port): serve the steps live to Foxglove
+    cloud_points: int = 3000  # LiDAR points per scan kept for run.mcap and the live view
     safe_repeats: int = 3  # neutral and release are each sent this often, 50 ms apart
 
 
@@ -395,7 +398,8 @@ class OnboardLoop:
         state = link.state
         age, delay = link.state_age_s, link.link_delay_s
         pred = predict_vector(state.vector, age + delay)
-        view = self.perception.update(t, self.lidar.scan(t, pred), pred)
+        cloud = self.lidar.scan(t, pred)
+        view = self.perception.update(t, cloud, pred)
         segs = view.segments
         t0 = time.perf_counter()
         extra = {k: v for k, v in (("blind", view.blind), ("vessels", view.tracks))
@@ -416,7 +420,7 @@ class OnboardLoop:
                     (pwm.get(m.throttle.channel), pwm.get(m.steering.channel)), segs,
                     nearest_segment_m(pred, segs), solve_ms, float(decision.slack_m),
                     hb.mode, hb.armed, str(decision.status), view=view,
-                    water=decision.stats.get("water"))
+                    water=decision.stats.get("water"), cloud=cloud, plan=decision.predicted)
         self.log.step(step)
         self.steps += 1
         self._show(step)
@@ -509,6 +513,29 @@ class OnboardLoop:
         _say(self.console, text)
 
 
+def _bridge_viz(options: BridgeOptions, log_dir, origin, scenario, console):
+    """run.mcap in the log folder (by default when the viz extra is installed) and/or the
+    live Foxglove view, or None."""
+    from scenarios.results.foxglove_messages import require_viz, viz_available
+
+    mcap = log_dir is not None and (viz_available() if options.mcap is None else options.mcap)
+    if not mcap and options.live is None:
+        return None
+    require_viz()
+    from bridge.step_log import BridgeViz
+    from scenarios.loop.runner import R_B_M
+    from scenarios.results.mcap_log import VizOptions
+    from scenarios.sensors.lidar import LidarConfig
+
+    viz = BridgeViz(VizOptions(mcap_path=log_dir / "run.mcap" if mcap else None,
+                               live=options.live, cloud_points=options.cloud_points),
+                    origin, LidarConfig().mounts if options.lidar == "sim" else (),
+                    hull_radius_m=R_B_M, separation_m=R_B_M + scenario.d_p_m)
+    if viz.live_url:
+        _say(console, f"bridge: live view for Foxglove on {viz.live_url}")
+    return viz
+
+
 def run_bridge(options: BridgeOptions, console=sys.stderr) -> BridgeResult:
     """`canalnav bridge`: load the scenario, build the controller and LiDAR source, connect,
     prepare, run; the link and logs are closed whatever happens."""
@@ -548,15 +575,18 @@ def run_bridge(options: BridgeOptions, console=sys.stderr) -> BridgeResult:
         signing_key=key, tlog_path=None if log_dir is None else log_dir / "mavlink.tlog",
         link_timeout_s=options.link_timeout_s, stale_s=options.stale_s,
         geodetic_origin=origin)
-    log = None
+    log = viz = None
     try:
+        viz = _bridge_viz(options, log_dir, origin, scenario, console)
         controller = NmpcController(scenario)
         _say(console, f"bridge: sending as system id {options.system_id}, component "
                       f"{options.component_id}: ArduPilot obeys RC overrides only from its GCS "
                       "id (SYSID_MYGCS / MAV_GCS_SYSID)" + (", signed" if key else ""))
-        log = StepLog(log_dir)
+        log = StepLog(log_dir, viz)
         return OnboardLoop(link, scenario, controller, lidar, options, console, log).run()
     finally:
         if log is not None:
             log.close()
+        elif viz is not None:
+            viz.close()
         link.close()

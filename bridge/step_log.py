@@ -6,7 +6,8 @@ scan's age and blindness, the vessels tracked, the rows perception cleaned away,
 estimate, status) and a row per event (failsafe, resume, waiting, parameter change, goal)
 with the state columns empty; `segments.csv` the segments each step used, `tracks.csv` the
 vessel tracks (as `canalnav run` writes them). All are flushed after every row, so a crash or
-a pulled plug loses nothing before it.
+a pulled plug loses nothing before it. With a `BridgeViz` the same steps go to run.mcap and/or
+the live Foxglove view (`scenarios.results.mcap_log`), on the same clock as steps.csv.
 """
 
 from __future__ import annotations
@@ -51,13 +52,84 @@ class Step:
     status: str
     view: object = None  # controller.perception.feed.PerceptionView of this step
     water: object = None  # controller.water_estimator.WaterEstimate of this step
+    cloud: object = None  # the LiDAR cloud of this step (N, 3) body frame, for the viewer
+    plan: object = None  # the controller's predicted horizon (K, >=3), for the viewer
+
+
+BRIDGE_FIGURES = (
+    "time_s", "ekf_time_s", "state_age_s", "link_delay_s", "u_mps", "v_mps", "r_radps",
+    "speed_mps", "nT_cmd_pct", "nS_cmd_pct", "throttle_pwm_us", "steering_pwm_us", "segments",
+    "nearest_segment_m", "scan_age_s", "blind", "tracks", "segments_cleaned", "current_n_mps",
+    "current_e_mps", "solve_ms", "slack_m", "armed",
+)
+
+
+class BridgeViz:
+    """The bridge's steps in Foxglove: the EKF pose as `boat`, the cloud, segments, plan,
+    hull circles, tracks, the position as a LocationFix (the bridge always has an origin),
+    and the figures of steps.csv; events (failsafes, waiting) as the `status` text."""
+
+    def __init__(self, options, origin, lidar_mounts=(), hull_radius_m: float = 3.0,
+                 separation_m: float | None = None):
+        from scenarios.results import foxglove_messages as fm
+        from scenarios.results.mcap_log import VizLog
+
+        self.log = VizLog(options, BRIDGE_FIGURES, ("mode", "status"), name="canalnav-bridge")
+        self.origin = tuple(origin)
+        self.lidars = fm.lidar_frames(lidar_mounts)
+        self.hull_radius_m = hull_radius_m
+        self.separation_m = separation_m
+
+    @property
+    def live_url(self):
+        return self.log.live_url
+
+    def step(self, s: Step) -> None:
+        from scenarios.results.foxglove_messages import finite
+
+        log, t = self.log, s.time_s
+        log.frames(t, s.predicted, None, self.lidars)
+        if s.cloud is not None:
+            log.cloud(t, s.cloud)
+        log.segments(t, s.segments)
+        log.plan(t, s.plan, self.hull_radius_m, self.separation_m)
+        view = s.view
+        if view is not None and view.tracks:
+            log.tracks(t, view.tracks)
+        log.fix(t, s.state[0], s.state[1], self.origin)
+        water = s.water
+        values = {"time_s": t, "ekf_time_s": s.ekf_time_s, "state_age_s": s.state_age_s,
+                  "link_delay_s": s.link_delay_s, "u_mps": s.state[3], "v_mps": s.state[4],
+                  "r_radps": s.state[5], "speed_mps": math.hypot(s.state[3], s.state[4]),
+                  "nT_cmd_pct": s.command[0], "nS_cmd_pct": s.command[1],
+                  "throttle_pwm_us": math.nan if s.pwm[0] is None else s.pwm[0],
+                  "steering_pwm_us": math.nan if s.pwm[1] is None else s.pwm[1],
+                  "segments": len(np.asarray(s.segments).reshape(-1, 4)),
+                  "nearest_segment_m": s.nearest_segment_m,
+                  "scan_age_s": math.nan if view is None else view.age_s,
+                  "blind": math.nan if view is None else int(view.blind),
+                  "tracks": 0 if view is None else len(view.tracks),
+                  "segments_cleaned": 0 if view is None else sum(view.dropped.values()),
+                  "current_n_mps": math.nan if water is None else water.current_ne[0],
+                  "current_e_mps": math.nan if water is None else water.current_ne[1],
+                  "solve_ms": s.solve_ms, "slack_m": s.slack_m, "armed": int(s.armed)}
+        values = {k: finite(v) for k, v in values.items()}
+        log.figures(t, {**values, "mode": s.mode, "status": s.status})
+        log.end_step(t)
+
+    def event(self, time_s: float, status: str, mode: str = "") -> None:
+        self.log.figures(time_s, {"time_s": time_s, "mode": mode, "status": status})
+
+    def close(self) -> None:
+        self.log.close()
 
 
 class StepLog:
     """steps.csv and segments.csv in a folder (or nowhere with `folder=None`)."""
 
-    def __init__(self, folder: Path | None):
+    def __init__(self, folder: Path | None, viz: BridgeViz | None = None):
         self._files = []
+        self.viz = viz
         if folder is None:
             self._w = self._sw = self._tw = None
             return
@@ -76,6 +148,8 @@ class StepLog:
         self._flush()
 
     def step(self, s: Step) -> None:
+        if self.viz is not None:
+            self.viz.step(s)
         if self._w is None:
             return
         nums = [s.time_s, s.ekf_time_s, s.state_age_s, s.link_delay_s, *s.state, *s.predicted,
@@ -104,6 +178,8 @@ class StepLog:
         self._flush()
 
     def event(self, time_s: float, status: str, mode: str = "", armed: bool | None = None) -> None:
+        if self.viz is not None:
+            self.viz.event(time_s, status, mode)
         if self._w is None:
             return
         row = [""] * len(STEP_COLUMNS)
@@ -117,6 +193,9 @@ class StepLog:
             fh.flush()
 
     def close(self) -> None:
+        if self.viz is not None:
+            self.viz.close()
+            self.viz = None
         for fh in self._files:
             fh.close()
         self._files = []

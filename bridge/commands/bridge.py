@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import argparse
+
 
 def register(sub) -> None:
     p = sub.add_parser(
@@ -38,7 +40,21 @@ def register(sub) -> None:
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds of control")
     p.add_argument("--resume", action="store_true",
                    help="after a failsafe, wait for the link and state to return and continue")
-    p.add_argument("--log", metavar="DIR", help="write mavlink.tlog, steps.csv, segments.csv here")
+    p.add_argument("--log", metavar="DIR", help="write mavlink.tlog, steps.csv, segments.csv, "
+                   "tracks.csv and run.mcap (for Foxglove, with the viz extra) here")
+    p.add_argument("--live", metavar="[HOST:]PORT",
+                   help="serve the steps live to Foxglove (Foxglove WebSocket, ws://HOST:PORT: "
+                   "pose, LiDAR cloud, segments, plan, figures); HOST is 127.0.0.1 (this "
+                   "machine only) unless given, e.g. 0.0.0.0:8765 to reach it over the boat's "
+                   "network. Never slows the 10 Hz loop (a slow viewer loses messages). Needs "
+                   "pip install 'canalnav[viz]'")
+    from scenarios.results.mcap_log import DEFAULT_CLOUD_POINTS, cloud_points_arg
+
+    p.add_argument("--mcap", action=argparse.BooleanOptionalAction, default=None,
+                   help="write run.mcap into --log DIR (default: when the viz extra is "
+                   "installed, which --mcap then requires)")
+    p.add_argument("--mcap-points", type=cloud_points_arg, default=DEFAULT_CLOUD_POINTS,
+                   metavar="N", help=f"LiDAR points kept per scan (default {DEFAULT_CLOUD_POINTS})")
     p.add_argument("--system-id", type=int, default=255, metavar="N",
                    help="our MAVLink system id (default 255: ArduPilot's GCS id, the only one "
                    "whose overrides it obeys)")
@@ -62,6 +78,12 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from bridge.onboard import BridgeOptions, parse_origin, run_bridge
+    from scenarios.results.foxglove_messages import require_viz
+    from scenarios.results.mcap_log import parse_live
+
+    live = parse_live(args.live) if args.live else None
+    if live is not None or args.mcap:
+        require_viz()
 
     options = BridgeOptions(
         connect=args.connect, scenario=args.scenario, lidar=args.lidar, arm=args.arm,
@@ -71,6 +93,7 @@ def run(args) -> int:
         link_timeout_s=args.link_timeout, stale_s=args.stale_after, speedup=args.speedup,
         ekf_timeout_s=args.ekf_timeout, heartbeat_timeout_s=args.heartbeat_timeout,
         seed=args.seed, origin=None if args.origin is None else parse_origin(args.origin),
+        mcap=args.mcap, live=live, cloud_points=args.mcap_points,
     )
     result = run_bridge(options)
     print(f"canalnav bridge: {result.reason} after {result.steps} control steps"

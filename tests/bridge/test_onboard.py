@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import math
 import re
 from dataclasses import replace
@@ -73,7 +74,8 @@ OPTIONS = BridgeOptions(heartbeat_timeout_s=5.0, ekf_timeout_s=5.0,
                         origin=(52.0, 4.0, 0.0))  # the fake autopilot's (straight.toml has none)
 
 
-def run_loop(ap, clock, scenario, controller, log_dir=None, lidar=None, at=None, **options):
+def run_loop(ap, clock, scenario, controller, log_dir=None, lidar=None, at=None, viz=None,
+             **options):
     """Run the loop; `at` = {time_s: action(ap)} applied by a clock peer."""
     link_kwargs = {k: options.pop(k) for k in ("link_timeout_s", "stale_s") if k in options}
     pending = dict(sorted((at or {}).items()))
@@ -86,7 +88,7 @@ def run_loop(ap, clock, scenario, controller, log_dir=None, lidar=None, at=None,
     link = AutopilotLink(ap.url, clock, tlog_path=None if log_dir is None else log_dir / "mavlink.tlog",
                          **link_kwargs)
     console = io.StringIO()
-    log = StepLog(log_dir)
+    log = StepLog(log_dir, viz)
     loop = OnboardLoop(link, scenario, controller, lidar or NoLidar(), replace(OPTIONS, **options),
                        console=console, log=log)
     try:
@@ -450,3 +452,52 @@ speed_mps = 2.0
     assert tracks and {r["id"] for r in tracks} == {str(tr.id)}
     rows = [r for r in read_steps(tmp_path) if r["x_m"]]
     assert int(rows[-1]["tracks"]) == 1 and rows[-1]["blind"] == "0"
+
+
+def test_bridge_writes_run_mcap_on_its_clock(make_autopilot, vclock, tmp_path):
+    """--log DIR with the viz extra: run.mcap beside steps.csv, a pose, cloud, segments and
+    figures per step at the times of steps.csv, and the position as a LocationFix."""
+    pytest.importorskip("foxglove")
+    from mcap.reader import make_reader
+    from mcap_protobuf.decoder import DecoderFactory
+
+    from bridge.lidar_source import SimLidarSource
+    from bridge.step_log import BridgeViz
+    from controller.geodetic import geodetic_to_ned
+    from scenarios.loop.controllers import NmpcController
+    from scenarios.results.mcap_log import TOPICS, VizOptions
+    from scenarios.sensors.lidar import LidarConfig
+
+    scenario = load_scenario(STRAIGHT)
+    ap = make_autopilot(state=tuple(scenario.initial_state))
+    viz = BridgeViz(VizOptions(mcap_path=tmp_path / "run.mcap"), OPTIONS.origin,
+                    LidarConfig().mounts, separation_m=5.0)
+    result, _ = run_loop(ap, vclock, scenario, NmpcController(scenario), log_dir=tmp_path,
+                         lidar=SimLidarSource(scenario), duration_s=1.0, viz=viz)
+    assert result.steps == 10
+    rows = [r for r in read_steps(tmp_path) if r["x_m"]]
+    msgs, factory, decoders = {}, DecoderFactory(), {}
+    with open(tmp_path / "run.mcap", "rb") as fh:
+        for schema, channel, message in make_reader(fh).iter_messages():
+            if channel.message_encoding == "json":
+                decoded = json.loads(message.data)
+            else:
+                if schema.id not in decoders:
+                    decoders[schema.id] = factory.decoder_for(channel.message_encoding, schema)
+                decoded = decoders[schema.id](message.data)
+            msgs.setdefault(channel.topic, []).append((message.log_time, decoded))
+    for k in ("tf", "cloud", "segments", "plan", "fix"):
+        assert len(msgs[TOPICS[k]]) == len(rows), k
+    steps = [m for m in msgs[TOPICS["figures"]] if "solve_ms" in m[1]]
+    assert len(steps) == len(rows)
+    assert any("time limit" in m[1]["status"] for m in msgs[TOPICS["figures"]])  # an event
+    for row, (t_ns, tf), (_, fix), (_, fig) in zip(rows, msgs[TOPICS["tf"]], msgs[TOPICS["fix"]],
+                                                   steps):
+        assert t_ns == round(float(row["time_s"]) * 1e9)
+        boat = {f.child_frame_id: f for f in tf.transforms}["boat"]
+        assert boat.translation.x == pytest.approx(float(row["pred_x_m"]), abs=1e-9)
+        assert boat.translation.y == pytest.approx(float(row["pred_y_m"]), abs=1e-9)
+        n, e = geodetic_to_ned(fix.latitude, fix.longitude, OPTIONS.origin)
+        assert (n, e) == pytest.approx((float(row["x_m"]), float(row["y_m"])), abs=1e-3)
+        assert fig["throttle_pwm_us"] == float(row["throttle_pwm_us"])
+    assert len(msgs[TOPICS["cloud"]][0][1].data) > 12 * 100
