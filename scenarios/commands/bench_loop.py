@@ -7,6 +7,11 @@ their wall times from the same run, and whether the two gave the same summary. B
 wall time, the CPU time of the run (this process and the perception worker's): on a shared
 machine the wall time grows with the other processes, the CPU time much less, so
 `cpu_real_time_factor` (simulated seconds per CPU second) compares builds across sessions.
+
+`--mcap` compares instead the loop writing run.mcap (and, with `--live`, serving it) against
+the same loop without, both with the LiDAR worker: the wall time per step of each, the
+writer's own time per step (`viz` in where the time goes), its share of the loop's step,
+and whether the summaries agree.
 """
 
 from __future__ import annotations
@@ -26,6 +31,11 @@ def register_bench(sub) -> None:
     p.add_argument("--duration", type=float, default=120.0,
                    help="simulated seconds per run (0: the scenario's own duration)")
     p.add_argument("--repeats", type=int, default=1, help="runs of each mode, alternating")
+    p.add_argument("--mcap", action="store_true",
+                   help="compare the loop with run.mcap against without it (LiDAR in the "
+                   "worker for both) instead of worker against serial")
+    p.add_argument("--live", metavar="[HOST:]PORT",
+                   help="with --mcap: serve the MCAP run live too (no viewer need connect)")
     p.set_defaults(func=run)
 
 
@@ -40,27 +50,47 @@ def run(args) -> int:
         raise InputError("bench loop: --duration must be >= 0 and --repeats >= 1")
     if args.duration > 0:
         scenario = replace(scenario, duration_s=min(args.duration, scenario.duration_s))
-    results = {"worker": [], "serial": []}
-    summaries = {}
+    modes = ("mcap", "plain") if args.mcap else ("worker", "serial")
+    live = None
+    if args.live:
+        if not args.mcap:
+            raise InputError("bench loop: --live goes with --mcap")
+        from scenarios.results.mcap_log import parse_live
+
+        live = parse_live(args.live)
+    results = {m: [] for m in modes}
+    summaries, sizes = {}, {}
     with tempfile.TemporaryDirectory() as tmp:
         for k in range(args.repeats):
-            for mode in ("worker", "serial") if k % 2 == 0 else ("serial", "worker"):
+            for mode in modes if k % 2 == 0 else modes[::-1]:
                 out = Path(tmp) / f"{mode}{k}"
                 cpu0 = _cpu_s()
                 r = run_scenario(scenario, out, plots=False,
-                                 parallel_perception=mode == "worker")
+                                 parallel_perception=mode != "serial", mcap=mode == "mcap",
+                                 live=live if mode == "mcap" else None)
                 r.timing["cpu_s"] = _cpu_s() - cpu0
                 results[mode].append(r.timing)
                 summaries[mode] = (out / "summary.json").read_text()
+                if (out / "run.mcap").exists():
+                    sizes[mode] = (out / "run.mcap").stat().st_size
                 steps = r.summary["steps"]
     report = {"scenario": scenario.name, "controller": scenario.controller,
               "simulated_s": round(steps * 0.1, 1), "steps": steps, "repeats": args.repeats}
     for mode, timings in results.items():
         report[mode] = _describe(timings, steps)
-    report["serial_over_worker_wall"] = round(
-        statistics.median(t["wall_time_s"] for t in results["serial"])
-        / statistics.median(t["wall_time_s"] for t in results["worker"]), 3)
-    report["same_summary"] = summaries["worker"] == summaries["serial"]
+    def wall(mode):
+        return statistics.median(t["wall_time_s"] for t in results[mode])
+
+    if args.mcap:
+        viz = statistics.median(t["where_the_time_goes_s"]["viz"] for t in results["mcap"])
+        report["mcap_over_plain_wall"] = round(wall("mcap") / wall("plain"), 3)
+        report["viz_ms_per_step"] = round(1e3 * viz / steps, 3)
+        report["viz_share_of_step"] = round(viz / wall("mcap"), 4)
+        report["mcap_bytes_per_step"] = sizes["mcap"] // steps
+        report["same_summary"] = summaries["mcap"] == summaries["plain"]
+    else:
+        report["serial_over_worker_wall"] = round(wall("serial") / wall("worker"), 3)
+        report["same_summary"] = summaries["worker"] == summaries["serial"]
     print(json.dumps(report, indent=2))
     return 0
 
