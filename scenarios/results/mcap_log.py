@@ -121,6 +121,7 @@ class VizLog:
         self._static_s = -math.inf
         self._static_key = None
         self._hull_s = -math.inf
+        self._walls_msg = None
 
     @property
     def live_url(self) -> str | None:
@@ -143,10 +144,11 @@ class VizLog:
         """The true walls and obstacle outlines, when they change (`key`) and every second."""
         if key == self._static_key and t - self._static_s < STATIC_EVERY_S - 1e-9:
             return
+        if key != self._static_key or self._walls_msg is None:  # built once per set of outlines
+            self._walls_msg = fm.polylines_update(t, [
+                ("walls", walls, fm.WALL_RGBA), ("obstacles", obstacles, fm.OBSTACLE_RGBA)])
         self._static_key, self._static_s = key, t
-        self._scene["walls"].log(fm.polylines_update(t, [
-            ("walls", walls, fm.WALL_RGBA), ("obstacles", obstacles, fm.OBSTACLE_RGBA)]),
-            log_time=fm.ns(t))
+        self._scene["walls"].log(self._walls_msg, log_time=fm.ns(t))
 
     def segments(self, t, segments) -> None:
         self._scene["segments"].log(fm.segments_update(t, segments), log_time=fm.ns(t))
