@@ -123,12 +123,13 @@ def with_water(scenario: Scenario, water: str) -> Scenario:
 def run_scenario(scenario: Scenario, out_dir: Path, controller: str | None = None,
                  seed: int | None = None, plant: str = "fmu", plots: bool = True,
                  progress=None, parallel_perception: bool | None = None,
-                 events=None, mcap: bool | None = None, live=None,
+                 events=None, mcap: bool | None = False, live=None,
                  cloud_points: int | None = None) -> RunResult:
     """Run one scenario into `out_dir` (log.csv, summary.json, timing.json, PNG plots, and
     run.mcap). `parallel_perception` changes the wall time only, never the results;
     `events(t, text)` hears when the controller starts or stops waiting. `mcap`: write
-    run.mcap (None: when the viz extra is installed; True without it: InputError naming it);
+    run.mcap (default no, as studies and tests want; None: when the viz extra is installed,
+    as `canalnav run` asks; True without it: InputError naming it);
     `live` (host, port): serve the run to Foxglove over WebSocket; `cloud_points`: points per
     LiDAR cloud in both (0: none). None of these changes the results."""
     if plant not in PLANTS:
