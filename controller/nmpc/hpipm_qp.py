@@ -129,11 +129,18 @@ def choose_build(which: str = "auto") -> HpipmBuild:
     return casadi_build()
 
 
+_casadi_hpipm = None
+
+
 @lru_cache(maxsize=None)
 def load_library(build: HpipmBuild | None = None) -> tuple[ctypes.CDLL, bool, float]:
     """The compiled shim for `build` (default casadi's) with its HPIPM opened: (library,
     cache_hit, compile seconds)."""
     build = build or casadi_build()
+    # casadi's HPIPM first, whichever build is asked for: libraries that name libhpipm.so
+    # (casadi's conic plugin) get the first one loaded under that soname, and must get theirs
+    global _casadi_hpipm
+    _casadi_hpipm = _casadi_hpipm or ctypes.CDLL(str(casadi_build().hpipm), mode=os.RTLD_LOCAL)
     code = resources.files("controller.nmpc").joinpath("hpipm_shim.c").read_text()
     flags = ("-O2", *(f"-I{p}" for p in build.includes))
     lib, _, hit, seconds = load_cached(f"nmpc_hpipm_{build.name}", code,
