@@ -397,19 +397,18 @@ class NmpcController:
         if prev is None:
             return slots
         active, was = slots[:, -1] > 0, prev[:, -1] > 0
-        same = (slots[:, None, :4] == prev[None, :, :4]).all(axis=2) & active[:, None] & was
-        new_at, old_at = np.nonzero(same)
-        if len(new_at) == 0:
+        same = (slots[:, None, :4] == prev[None, :, :4]).all(axis=2)
+        same &= active[:, None] & was[None, :]
+        matched = same.any(axis=1)
+        old_at = same.argmax(axis=1)[matched]
+        if not matched.any() or np.bincount(old_at).max() > 1:  # none kept, or a duplicate
             return slots
-        _, first = np.unique(new_at, return_index=True)  # one old slot per new row
-        new_at, old_at = new_at[first], old_at[first]
-        _, first = np.unique(old_at, return_index=True)  # and one new row per old slot
-        new_at, old_at = new_at[first], old_at[first]
         out = np.zeros_like(slots)
-        out[old_at] = slots[new_at]
-        rest = np.setdiff1d(np.flatnonzero(active), new_at)
-        free = np.setdiff1d(np.arange(len(slots)), old_at)[: len(rest)]
-        out[free] = slots[rest]
+        out[old_at] = slots[matched]
+        taken = np.zeros(len(slots), bool)
+        taken[old_at] = True
+        rest = np.flatnonzero(active & ~matched)
+        out[np.flatnonzero(~taken)[: len(rest)]] = slots[rest]
         self._slots_prev = out
         return out
 
