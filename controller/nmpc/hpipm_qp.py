@@ -26,7 +26,7 @@ import casadi as ca
 import numpy as np
 
 from ..errors import InputError
-from .codegen_cache import load_cached
+from .codegen_cache import cache_dir, load_cached
 
 MODES = {"speed_abs": 0, "speed": 1, "balance": 2, "robust": 3}
 STATUS = {0: "success", 1: "max_iter", 2: "min_step", 3: "nan", 4: "inconsistent_eq"}
@@ -132,11 +132,14 @@ def choose_build(which: str = "auto") -> HpipmBuild:
 _casadi_hpipm = None
 
 
-@lru_cache(maxsize=None)
 def load_library(build: HpipmBuild | None = None) -> tuple[ctypes.CDLL, bool, float]:
     """The compiled shim for `build` (default casadi's) with its HPIPM opened: (library,
-    cache_hit, compile seconds)."""
-    build = build or casadi_build()
+    cache_hit, compile seconds); once per build and cache folder in a process."""
+    return _load_library(build or casadi_build(), cache_dir())
+
+
+@lru_cache(maxsize=None)
+def _load_library(build: HpipmBuild, directory: Path) -> tuple[ctypes.CDLL, bool, float]:
     # casadi's HPIPM first, whichever build is asked for: libraries that name libhpipm.so
     # (casadi's conic plugin) get the first one loaded under that soname, and must get theirs
     global _casadi_hpipm
@@ -145,7 +148,7 @@ def load_library(build: HpipmBuild | None = None) -> tuple[ctypes.CDLL, bool, fl
     flags = ("-O2", *(f"-I{p}" for p in build.includes))
     lib, _, hit, seconds = load_cached(f"nmpc_hpipm_{build.name}", code,
                                        lambda path: ctypes.CDLL(str(path)), flags=flags,
-                                       link=("-ldl", "-lm"))
+                                       link=("-ldl", "-lm"), directory=directory)
     lib.nmpc_qp_load.restype = ctypes.c_int
     lib.nmpc_qp_load.argtypes = [ctypes.c_char_p, ctypes.c_char_p]
     lib.nmpc_qp_load_error.restype = ctypes.c_char_p
