@@ -36,10 +36,29 @@ def register_bench(sub) -> None:
     p.add_argument("--vessel-steps", type=int, default=600,
                    help="steps of the RTI runs with other vessels (an oncoming tour boat and a "
                    "crossing launch), with the vessel slots and without them; 0 skips them")
+    p.add_argument("--hpipm-build", default="auto", choices=("auto", "tuned", "casadi"),
+                   help="HPIPM + BLASFEO for the direct interface: 'tuned' (the CPU's kernels, "
+                   "from comma-deps-acados installed beside, see README), 'casadi' (its generic "
+                   "one), 'auto' (tuned when installed; default)")
+    p.add_argument("--warm-start", type=int, default=None, choices=(0, 1, 2),
+                   help="HPIPM's warm start (default: QpOptions', 0)")
+    p.add_argument("--mu0", type=float, default=None,
+                   help="HPIPM's initial barrier (default: QpOptions'; 0 = HPIPM's own)")
+    p.add_argument("--no-unsplit-peer", dest="unsplit_peer", action="store_false",
+                   help="skip the RTI run without the preparation/feedback split (the peer "
+                   "the split's trajectory and latency are compared with)")
     p.add_argument("--qp-compare-steps", type=int, default=200,
                    help="steps of extra RTI runs with each QP solver (hpipm direct, hpipm "
                    "through CasADi, piqp); 0 skips them (200)")
     p.set_defaults(func=run)
+
+
+def _stats_ms(values) -> dict:
+    import numpy as np
+
+    v = np.asarray(values, float) * 1e3
+    return {"mean": round(float(v.mean()), 3), "p99": round(float(np.percentile(v, 99)), 3),
+            "max": round(float(v.max()), 3)}
 
 
 def _summary(run, label: str) -> dict:
@@ -50,6 +69,9 @@ def _summary(run, label: str) -> dict:
     cpu = np.array([s.cpu_time_s for s in st]) * 1e3
     out = {
         "steps": len(run.steps),
+        "feedback_latency_ms": _stats_ms([s.time_feedback_s for s in st]),
+        "preparation_ms": _stats_ms([s.time_preparation_s for s in st]),
+        "fed_back_steps": int(sum(s.fed_back for s in st)),
         "mean_ms": round(float(t.mean()), 3),
         "p99_ms": round(float(np.percentile(t, 99)), 3),
         "max_ms": round(float(t.max()), 3),
@@ -60,6 +82,8 @@ def _summary(run, label: str) -> dict:
             "linearisation": round(1e3 * float(np.mean([s.time_linearisation_s for s in st])), 3),
             "qp": round(1e3 * float(np.mean([s.time_qp_s for s in st])), 3),
             "glue": round(1e3 * float(np.mean([s.time_glue_s for s in st])), 3),
+            "feedback_glue": round(1e3 * float(np.mean([s.time_feedback_glue_s for s in st])), 3),
+            "preparation": round(1e3 * float(np.mean([s.time_preparation_s for s in st])), 3),
         },
         "qp_iterations_mean": round(float(np.mean([s.qp_iterations for s in st])), 2),
         "sqp_iterations_mean": round(float(np.mean([s.sqp_iterations for s in st])), 2),
@@ -101,7 +125,8 @@ def _vessel_cases(config, qp, canal, x0, act0, args) -> dict:
         run = closed_loop(controller, canal, x0, act0, args.vessel_steps, args.speed,
                           vessels=vs)
         s = _summary(run, "rti")
-        out[name] = {k: s[k] for k in ("mean_ms", "p99_ms", "max_ms", "cpu_ms",
+        out[name] = {k: s[k] for k in ("feedback_latency_ms", "preparation_ms", "mean_ms",
+                                       "p99_ms", "max_ms", "cpu_ms",
                                        "breakdown_mean_ms", "failed_steps", "fallback_steps",
                                        "stopped_by_failure")}
         out[name]["vessel_slots"] = cfg.vessel_slots
@@ -140,7 +165,18 @@ def run(args) -> int:
         raise InputError(f"--segment-slots: need at least 1, got {args.segment_slots}")
     config = NmpcConfig() if args.segment_slots is None \
         else NmpcConfig(segment_slots=args.segment_slots)
-    qp = QpOptions() if args.qp_tol is None else QpOptions(tol=args.qp_tol)
+    from dataclasses import replace
+
+    from controller.nmpc.hpipm_qp import choose_build
+
+    qp = QpOptions(hpipm_build=args.hpipm_build)
+    if args.qp_tol is not None:
+        qp = replace(qp, tol=args.qp_tol)
+    if args.warm_start is not None:
+        qp = replace(qp, warm_start=args.warm_start)
+    if args.mu0 is not None:
+        qp = replace(qp, mu0=args.mu0)
+    build = choose_build(qp.hpipm_build)
     canal = bend_canal(narrow_m=args.narrow_m)
     x0, act0 = np.array([0.0, 0.0, 0.0, args.speed, 0.0, 0.0]), np.array([47.0, 0.0])
 
@@ -156,24 +192,38 @@ def run(args) -> int:
         "solvers": {},
     }
     runs = {}
-    for method in solvers:
-        print(f"bench nmpc: {method} ...", file=sys.stderr, flush=True)
-        controller = NmpcController(config, method=method, qp=qp)
+    plan = [(m, m, True) for m in solvers]
+    if "rti" in solvers and args.unsplit_peer:
+        plan.insert(solvers.index("rti") + 1, ("rti_unsplit", "rti", False))
+    for label, method, split in plan:
+        print(f"bench nmpc: {label} ...", file=sys.stderr, flush=True)
+        controller = NmpcController(config, method=method, qp=qp, split=split)
         if controller.compiled_info is not None and "codegen" not in result:
             info = controller.compiled_info
             result["codegen"] = {"compiled": info.compiled, "cache_hit": info.cache_hit,
                                  "compile_s": round(info.compile_s, 2),
                                  "library": str(info.library) if info.library else None}
-        runs[method] = closed_loop(controller, canal, x0, act0, args.steps, args.speed)
-        result["solvers"][method] = _summary(runs[method], method)
+        runs[label] = closed_loop(controller, canal, x0, act0, args.steps, args.speed)
+        result["solvers"][label] = _summary(runs[label], method)
         if method != "ipopt":
-            result["solvers"][method]["qp"] = {"solver": qp.solver, "mode": qp.hpipm_mode,
-                                               "tol": qp.tol}
+            result["solvers"][label]["qp"] = {
+                "solver": controller._qp.options.solver, "mode": qp.hpipm_mode, "tol": qp.tol,
+                "warm_start": qp.warm_start, "mu0": qp.mu0,
+                "hpipm_build": f"{build.name} ({build.target})"}
 
     if "rti" in runs:
         rti_mean = result["solvers"]["rti"]["mean_ms"]
         result["ratios_mean_over_rti"] = {
-            m: round(result["solvers"][m]["mean_ms"] / rti_mean, 1) for m in runs if m != "rti"}
+            m: round(result["solvers"][m]["mean_ms"] / rti_mean, 2) for m in runs if m != "rti"}
+        if "rti_unsplit" in runs:
+            n = min(len(runs["rti"].states), len(runs["rti_unsplit"].states))
+            d = np.hypot(*(runs["rti"].states[:n, :2] - runs["rti_unsplit"].states[:n, :2]).T)
+            result["rti_vs_rti_unsplit_max_position_diff_m"] = float(f"{d.max():.3g}")
+            u, r_ = result["solvers"]["rti_unsplit"], result["solvers"]["rti"]
+            result["split_over_unsplit"] = {
+                "feedback_latency_mean": round(r_["feedback_latency_ms"]["mean"]
+                                               / u["feedback_latency_ms"]["mean"], 3),
+                "step_mean": round(r_["mean_ms"] / u["mean_ms"], 3)}
         for other in ("sqp", "ipopt"):
             if other in runs:  # over the steps both ran (a failure stops a run early)
                 n = min(len(runs["rti"].states), len(runs[other].states))
@@ -183,6 +233,11 @@ def run(args) -> int:
         complete = all(not run_.failure and len(run_.steps) == args.steps
                        for run_ in runs.values())
         result["goal"] = {
+            "rti_feedback_mean_ms<=0.2": r["feedback_latency_ms"]["mean"] <= 0.2,
+            "rti_feedback_p99_ms<=0.35": r["feedback_latency_ms"]["p99"] <= 0.35,
+            "rti_step_mean_ms<=0.5": r["mean_ms"] <= 0.5,
+            "rti_vs_unsplit<=0.01m": result.get("rti_vs_rti_unsplit_max_position_diff_m",
+                                                1e9) <= 0.01,
             "rti_mean_ms<=2": r["mean_ms"] <= 2.0, "rti_p99_ms<=5": r["p99_ms"] <= 5.0,
             "ipopt/rti>=30": result["ratios_mean_over_rti"].get("ipopt", 0) >= 30,
             "rti_vs_sqp<=0.2m": complete
@@ -195,15 +250,21 @@ def run(args) -> int:
 
     if args.qp_compare_steps > 0:
         compare = {}
-        for solver in ("hpipm", "hpipm-casadi", "piqp"):
-            print(f"bench nmpc: RTI with {solver} ...", file=sys.stderr, flush=True)
-            controller = NmpcController(config, method="rti",
-                                        qp=QpOptions(solver=solver, tol=qp.tol))
+        options = {"hpipm (casadi's BLASFEO)": replace(qp, hpipm_build="casadi"),
+                   "hpipm-casadi": replace(qp, solver="hpipm-casadi"),
+                   "piqp": replace(qp, solver="piqp")}
+        if build.name == "tuned":
+            options = {f"hpipm (tuned BLASFEO, {build.target})": replace(qp, hpipm_build="tuned"),
+                       **options}
+        for name, options_ in options.items():
+            print(f"bench nmpc: RTI with {name} ...", file=sys.stderr, flush=True)
+            controller = NmpcController(config, method="rti", qp=options_)
             run_ = closed_loop(controller, canal, x0, act0, args.qp_compare_steps, args.speed)
             s = _summary(run_, "rti")
-            compare[solver] = {k: s[k] for k in ("mean_ms", "p99_ms", "max_ms", "cpu_ms",
-                                                  "breakdown_mean_ms", "qp_iterations_mean",
-                                                  "failed_steps")}
+            compare[name] = {k: s[k] for k in ("feedback_latency_ms", "preparation_ms",
+                                                "mean_ms", "p99_ms", "max_ms", "cpu_ms",
+                                                "breakdown_mean_ms", "qp_iterations_mean",
+                                                "failed_steps")}
         result["qp_solvers_rti"] = compare
     print(json.dumps(result, indent=2))
     return 0

@@ -13,7 +13,7 @@ the caller must stop the boat.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -55,11 +55,20 @@ class SolverStats:
     vessels: tuple = ()  # ids of the tracks in the vessel slots
     vessels_dropped: int = 0  # vessels in range that found no slot
     rules: str = ""  # what the rules of the road ask ("meeting 3: keep to starboard")
+    time_feedback_s: float = 0.0  # state in to command out (the feedback phase)
+    time_preparation_s: float = 0.0  # the preparation of this step (done after a command)
+    fed_back: bool = False  # the feedback used the prepared QP (False: linearised anew)
 
     @property
     def time_glue_s(self) -> float:
         """Everything else: reference, segment slots, warm start, Python."""
         return self.time_total_s - self.time_linearisation_s - self.time_qp_s
+
+    @property
+    def time_feedback_glue_s(self) -> float:
+        """The feedback's own Python: reference, slots, command (its linearisation and QP
+        aside)."""
+        return self.time_feedback_s - self.time_linearisation_s - self.time_qp_s
 
 
 @dataclass(frozen=True)
@@ -114,12 +123,13 @@ class NmpcController:
     def __init__(self, config: NmpcConfig = NmpcConfig(), method: str = "rti",
                  qp: QpOptions = QpOptions(), compiled: bool = True, sqp_max_iter: int = 50,
                  sqp_tol: float = 1e-3, max_failures: int = 3,
-                 reference_search_ahead_m: float = 50.0):
+                 reference_search_ahead_m: float = 50.0, split: bool = True):
         if method not in METHODS:
             raise InputError(f"NMPC method {method!r}: choose one of {', '.join(METHODS)}")
         if max_failures < 1:
             raise InputError(f"max_failures: must be at least 1, got {max_failures!r}")
         self.config, self.method = config, method
+        self.split = bool(split)  # step() prepares the next step after each (RTI, direct hpipm)
         self.max_failures, self.sqp_max_iter, self.sqp_tol = max_failures, sqp_max_iter, sqp_tol
         self.search_ahead_m = reference_search_ahead_m
         self.ocp = build_ocp(config)
@@ -129,6 +139,8 @@ class NmpcController:
         self._lbw, self._ubw = self.ocp.bounds(np.zeros(NX_BOAT))
         self._x0_at = self.ocp.states_at[0]
         self._xy_at = self.ocp.states_at[:, :2]
+        self._ref_at = self.ocp.states_at[:, :NX_BOAT]
+        self._slack_ref_at = self.ocp.states_at[1:, NX - 1]
         self._top_speed = top_speed_mps(config.boat, config.nT_max)
         self._way = WayAhead(config.min_passage_m, config.stop_short_m, config.stop_decel_mps2,
                              config.resume_after_s)
@@ -139,12 +151,17 @@ class NmpcController:
             self._ipopt = IpoptSolver(self.ocp)
         else:
             linearisation = self.ocp.linearisation
+            compile = None
             if compiled:
                 from .codegen_cache import compile_cached
 
                 self.compiled_info = compile_cached(linearisation)
                 linearisation = self.compiled_info.function
-            self._qp = QpStep(self.ocp, linearisation, qp)
+                compile = lambda f: compile_cached(f).function  # noqa: E731
+            self._qp = QpStep(self.ocp, linearisation, qp, compile)
+        self._p = self._params.copy()
+        self._w_ref = np.zeros(self.ocp.nw)
+        self._lbw_step, self._ubw_step = self._lbw.copy(), self._ubw.copy()
         self.reset()
 
     def reset(self) -> None:
@@ -158,12 +175,53 @@ class NmpcController:
         self._way.reset()
         self._rules_stop: Shaping | None = None
         self._rules_clear_s = 0.0
+        self._prepared: tuple[float, np.ndarray] | None = None  # (elapsed_s, guess)
+        self._slots_prev: np.ndarray | None = None
+        self._preparation_s = 0.0
 
     # -- the step ---------------------------------------------------------------------------
     def step(self, state, actuators, segments, waypoints, target_speed_mps: float,
              current=(0.0, 0.0), elapsed_s: float | None = None,
              blind: bool = False, bias=(0.0, 0.0, 0.0), vessels=()) -> NmpcStep:
-        """One control period.
+        """One control period: `feedback` for this state, then `prepare` for the next (with
+        `split`; the stats count both). Arguments as `feedback`."""
+        out = self.feedback(state, actuators, segments, waypoints, target_speed_mps, current,
+                            elapsed_s, blind, bias, vessels)
+        if not self.split:
+            return out
+        preparation = self.prepare()
+        st = out.stats
+        stats = replace(st, time_preparation_s=preparation,
+                        time_total_s=st.time_feedback_s + preparation)
+        return replace(out, stats=stats)
+
+    def prepare(self, elapsed_s: float | None = None) -> float:
+        """The preparation phase of the real-time iteration, right after a command is sent:
+        the plan shifted by `elapsed_s` (default: the control period; the next `feedback`
+        must be called with the same) linearised with this step's parameters and the QP set
+        up, so that the next `feedback` only embeds its state and solves. Returns its
+        seconds. Does nothing for SQP and IPOPT or before a first plan; a next step whose
+        segments, vessels, reference slots, current or bias differ from this one's is
+        linearised anew in its feedback (the answer never depends on the split)."""
+        t0 = time.perf_counter()
+        self._prepared = None
+        if self.method != "rti" or self._plan is None:
+            self._preparation_s = 0.0
+            return 0.0
+        c = self.config
+        elapsed = c.control_period_s if elapsed_s is None else finite_number(elapsed_s,
+                                                                             "elapsed_s")
+        guess = self._shifted_plan(elapsed)
+        if self._qp.prepare(guess, self._p, self._lbw, self._ubw):
+            self._prepared = (elapsed, guess)
+        self._preparation_s = time.perf_counter() - t0
+        return self._preparation_s
+
+    def feedback(self, state, actuators, segments, waypoints, target_speed_mps: float,
+                 current=(0.0, 0.0), elapsed_s: float | None = None,
+                 blind: bool = False, bias=(0.0, 0.0, 0.0), vessels=()) -> NmpcStep:
+        """The feedback phase: this state in, the command out (after a `prepare`, the QP is
+        mostly set up; without one, the whole step is done here).
 
         state: [x, y, psi, u, v, r] (NED m, rad, body m/s, rad/s); actuators: the current
         [nT, nS] in %; segments: (M, 4) rows (x_c, y_c, theta, length); waypoints: (K, 2)
@@ -195,7 +253,11 @@ class NmpcController:
         elapsed = c.control_period_s if elapsed_s is None else finite_number(elapsed_s, "elapsed_s")
         if elapsed < 0:
             raise InputError(f"elapsed_s: must be a non-negative number of s, got {elapsed:g}")
-        guess = self._shifted_plan(elapsed)
+        prepared, self._prepared = self._prepared, None
+        if prepared is not None and prepared[0] == elapsed:
+            guess = prepared[1]
+        else:
+            prepared, guess = None, self._shifted_plan(elapsed)
         if guess is not None:
             x[2] = float(unwrap_near(x[2], guess[self.ocp.state_index(0)][2]))
         segs = check_segments(segments)
@@ -214,28 +276,34 @@ class NmpcController:
         planned = reference.states[:, :2] if guess is None else guess[self._xy_at]
         selection = select_segments(segs, x[:2], c.segment_slots, c.segment_range_m,
                                     planned)
-        slots = selection.slots
+        slots = self._keep_slots(selection.slots)
         vessel_sel = predict_vessels(vessels, c.vessel_slots, c.horizon, c.step_s, planned,
                                      x[:2])
-        p = self._params.copy()
-        p[self._layout.vessels] = vessel_sel.slots.ravel()
-        p[self._layout.current] = current
-        p[self._layout.bias] = bias
-        p[self._layout.segments] = slots.ravel()
+        p = self._p  # filled in place: every part is written each step
+        lay = self._layout
+        p[lay.vessels] = vessel_sel.slots.reshape(-1)
+        p[lay.current] = current
+        p[lay.bias] = bias
+        p[lay.segments] = slots.reshape(-1)
         x_init = np.concatenate([x, act])
-        lbw, ubw = self._lbw.copy(), self._ubw.copy()
-        lbw[self._x0_at] = ubw[self._x0_at] = np.concatenate([x_init, [0.0]])
+        lbw, ubw = self._lbw_step, self._ubw_step
+        lbw[self._x0_at[:NX_BOAT]] = ubw[self._x0_at[:NX_BOAT]] = x_init
         slack_ref = self._slack_reference(reference, speed, guess, x[:2], slots)
-        w_ref = np.zeros(self.ocp.nw)
-        w_ref[self.ocp.states_at[:, :NX_BOAT]] = reference.states
-        w_ref[self.ocp.states_at[1:, NX - 1]] = slack_ref
+        w_ref = self._w_ref
+        w_ref[self._ref_at] = reference.states
+        w_ref[self._slack_ref_at] = slack_ref
 
         fallback = ""
+        fed_back = False
         if guess is None:
             guess = self._safe_guess(x_init, reference, slack_ref)
             result = self._solve(self._start_at(guess, x_init), p, w_ref, lbw, ubw)
         else:
-            result = self._solve(self._start_at(guess, x_init), p, w_ref, lbw, ubw)
+            start = self._start_at(guess, x_init)
+            if prepared is not None and self._qp.can_feed_back(start, p):
+                result, fed_back = self._feed_back(start, p, w_ref, lbw, ubw), True
+            else:
+                result = self._solve(start, p, w_ref, lbw, ubw)
             if not result.ok:
                 retry = self._solve(self._safe_guess(x_init, reference, slack_ref), p, w_ref,
                                     lbw, ubw)
@@ -258,8 +326,9 @@ class NmpcController:
                 fallback, plan = "shifted_plan", self._start_at(guess, x_init)
         self._plan = plan
         self._progress_m = reference.progress_m
+        preparation, self._preparation_s = (self._preparation_s if prepared else 0.0), 0.0
         return self._output(plan, act, reference, result, fallback, t0, selection, stop,
-                            vessel_sel, rules)
+                            vessel_sel, rules, fed_back, preparation)
 
     # -- pieces -----------------------------------------------------------------------------
     def _rules(self, s: float, d: float, vessels, segments, speed_mps: float,
@@ -317,6 +386,47 @@ class NmpcController:
             return SqpResult(w, False, False, "implausible solution (bounds violated)",
                              result.sqp_iterations, result.qp_iterations, result.step_norm,
                              result.time_linearisation_s, result.time_qp_s)
+        return result
+
+    def _keep_slots(self, slots: np.ndarray) -> np.ndarray:
+        """The selected segments with each one still selected in the slot it had last step:
+        the order of the slots does not change the OCP, and a set of slots unchanged from
+        the prepared step lets the feedback keep the prepared constraints."""
+        prev = self._slots_prev
+        self._slots_prev = slots
+        if prev is None:
+            return slots
+        active, was = slots[:, -1] > 0, prev[:, -1] > 0
+        same = (slots[:, None, :4] == prev[None, :, :4]).all(axis=2)
+        same &= active[:, None] & was[None, :]
+        matched = same.any(axis=1)
+        old_at = same.argmax(axis=1)[matched]
+        if not matched.any() or np.bincount(old_at).max() > 1:  # none kept, or a duplicate
+            return slots
+        out = np.zeros_like(slots)
+        out[old_at] = slots[matched]
+        taken = np.zeros(len(slots), bool)
+        taken[old_at] = True
+        rest = np.flatnonzero(active & ~matched)
+        out[np.flatnonzero(~taken)[: len(rest)]] = slots[rest]
+        self._slots_prev = out
+        return out
+
+    def _feed_back(self, w, p, w_ref, lbw, ubw) -> SqpResult:
+        """The RTI step on the prepared QP: what `_solve` gives for RTI, but for the
+        linearisation done in `prepare`."""
+        r = self._qp.feedback(w, p, w_ref)
+        if not r.ok:
+            return SqpResult(w, False, False, f"QP failed ({r.status})", 1,
+                             max(r.qp_iterations, 0), np.inf, r.time_linearisation_s,
+                             r.time_qp_s)
+        new = w + r.dw
+        norm = float(np.max(np.abs(r.dw)))
+        result = SqpResult(new, True, norm < self.sqp_tol, r.status, 1, max(r.qp_iterations, 0),
+                           norm, r.time_linearisation_s, r.time_qp_s)
+        if not self._plausible(new, lbw, ubw):
+            return SqpResult(w, False, False, "implausible solution (bounds violated)", 1,
+                             result.qp_iterations, norm, r.time_linearisation_s, r.time_qp_s)
         return result
 
     @staticmethod
@@ -410,7 +520,7 @@ class NmpcController:
 
     def _output(self, plan, act, reference, result: SqpResult, fallback: str,
                 t0: tuple[float, float], selection, stop=None, vessel_sel=None,
-                rules=None) -> NmpcStep:
+                rules=None, fed_back: bool = False, preparation_s: float = 0.0) -> NmpcStep:
         c = self.config
         states, inputs = self.ocp.unpack(plan)
         rate_max = np.array([c.dnT_max, c.dnS_max])
@@ -431,6 +541,10 @@ class NmpcController:
             blocked_at_m=None if stop is None else stop.blocked_at_m,
             vessels=() if vessel_sel is None else vessel_sel.ids,
             vessels_dropped=0 if vessel_sel is None else vessel_sel.dropped,
-            rules="" if rules is None else rules.reason)
+            rules="" if rules is None else rules.reason, fed_back=fed_back)
+        feedback_s = time.perf_counter() - t0[0]
+        stats = replace(stats, time_feedback_s=feedback_s,
+                        time_total_s=feedback_s + preparation_s,
+                        time_preparation_s=preparation_s, cpu_time_s=time.thread_time() - t0[1])
         return NmpcStep(command, rates, states[:, :NX_BOAT].copy(), inputs[:, :2].copy(),
                         states[1:, NX - 1].copy(), reference, stats)

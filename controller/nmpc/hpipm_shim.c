@@ -1,4 +1,4 @@
-/* The NMPC's QP, handed to HPIPM's OCP interior-point solver in one call.
+/* The NMPC's QP, handed to HPIPM's OCP interior-point solver stage by stage.
  *
  * CasADi's conic interface to HPIPM spends about 1 ms a call turning a sparse QP into
  * stages; the OCP already comes in stages, so this shim passes the per-stage blocks
@@ -10,8 +10,18 @@
  *   box bounds on nbx state and nbu input components (fixed indices),
  *   lg_k <= C_k x_k <= ug_k on stages 1..N (no input terms).
  *
- * Built with the HPIPM and BLASFEO that ship inside the casadi Python package.
+ * The blocks are bound once (`nmpc_qp_bind`, numpy arrays that live as long as the QP);
+ * `nmpc_qp_set` copies a group of them for a range of stages into HPIPM's QP, so that the
+ * RTI's preparation sets what it knows and the feedback only the few blocks the new state
+ * changes; `nmpc_qp_solve` solves the QP as it is.
+ *
+ * HPIPM and BLASFEO are opened by path (`nmpc_qp_load`) with RTLD_DEEPBIND: two builds (the
+ * one inside casadi and one tuned for the CPU) share the soname libhpipm.so, so linking by
+ * name would give whichever the process loaded first. Compiled against the headers of the
+ * build it opens (their structs differ between versions).
  */
+#define _GNU_SOURCE
+#include <dlfcn.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -20,14 +30,53 @@
 #include "hpipm_d_ocp_qp_ipm.h"
 #include "hpipm_d_ocp_qp_sol.h"
 
+#define HPIPM_FUNCTIONS(X)                                                                   \
+    X(d_ocp_qp_dim_memsize) X(d_ocp_qp_dim_create) X(d_ocp_qp_dim_set_nx)                    \
+    X(d_ocp_qp_dim_set_nu) X(d_ocp_qp_dim_set_nbx) X(d_ocp_qp_dim_set_nbu)                   \
+    X(d_ocp_qp_dim_set_ng) X(d_ocp_qp_memsize) X(d_ocp_qp_create) X(d_ocp_qp_set_A)          \
+    X(d_ocp_qp_set_B) X(d_ocp_qp_set_b) X(d_ocp_qp_set_Q) X(d_ocp_qp_set_S)                  \
+    X(d_ocp_qp_set_R) X(d_ocp_qp_set_q) X(d_ocp_qp_set_r) X(d_ocp_qp_set_idxbx)              \
+    X(d_ocp_qp_set_lbx) X(d_ocp_qp_set_ubx) X(d_ocp_qp_set_idxbu) X(d_ocp_qp_set_lbu)        \
+    X(d_ocp_qp_set_ubu) X(d_ocp_qp_set_C) X(d_ocp_qp_set_D) X(d_ocp_qp_set_lg)               \
+    X(d_ocp_qp_set_ug) X(d_ocp_qp_sol_memsize) X(d_ocp_qp_sol_create) X(d_ocp_qp_sol_get_x)  \
+    X(d_ocp_qp_sol_get_u) X(d_ocp_qp_ipm_arg_memsize) X(d_ocp_qp_ipm_arg_create)             \
+    X(d_ocp_qp_ipm_arg_set_default) X(d_ocp_qp_ipm_arg_set_iter_max)                         \
+    X(d_ocp_qp_ipm_arg_set_tol_stat) X(d_ocp_qp_ipm_arg_set_tol_eq)                          \
+    X(d_ocp_qp_ipm_arg_set_tol_ineq) X(d_ocp_qp_ipm_arg_set_tol_comp)                        \
+    X(d_ocp_qp_ipm_arg_set_mu0) X(d_ocp_qp_ipm_arg_set_warm_start) X(d_ocp_qp_ipm_ws_memsize) \
+    X(d_ocp_qp_ipm_ws_create) X(d_ocp_qp_ipm_solve) X(d_ocp_qp_ipm_get_status)               \
+    X(d_ocp_qp_ipm_get_iter) X(d_ocp_qp_ipm_get_max_res_stat)                                \
+    X(d_ocp_qp_ipm_get_max_res_eq) X(d_ocp_qp_ipm_get_max_res_ineq)                          \
+    X(d_ocp_qp_ipm_get_max_res_comp)
+
+#define DECLARE(name) __typeof__(&name) name;
+static struct { HPIPM_FUNCTIONS(DECLARE) } F;
+static void *blasfeo_handle, *hpipm_handle;
+
+/* Open BLASFEO then HPIPM by path and look the functions up: 0 on success, else the number
+ * of the failing step (1, 2: a library; 3: a missing function). */
+int nmpc_qp_load(const char *blasfeo_path, const char *hpipm_path)
+{
+    if (hpipm_handle) return 0;
+    int flags = RTLD_NOW | RTLD_LOCAL | RTLD_DEEPBIND;
+    blasfeo_handle = dlopen(blasfeo_path, flags);
+    if (!blasfeo_handle) return 1;
+    void *h = dlopen(hpipm_path, flags);
+    if (!h) return 2;
+#define LOOKUP(name) if (!(*(void **)&F.name = dlsym(h, #name))) return 3;
+    HPIPM_FUNCTIONS(LOOKUP)
+    hpipm_handle = h;
+    return 0;
+}
+
+const char *nmpc_qp_load_error(void) { return dlerror(); }
+
 typedef struct {
     int N, nx, nu, ng, nbx, nbu;
-    int *nx_k, *nu_k, *nbx_k, *nbu_k, *ng_k, *ns_k;
     int *idxbx, *idxbu;
     double *Qdense, *Rdense, *Sdense, *Ddense; /* per stage, built once */
-    double **hA, **hB, **hb, **hQ, **hS, **hR, **hq, **hr, **hlbx, **hubx, **hlbu, **hubu;
-    double **hC, **hD, **hlg, **hug;
-    int **hidxbx, **hidxbu;
+    double *A, *B, *b, *q, *r, *lbx, *ubx, *lbu, *ubu, *C, *lg, *ug, *x, *u, *res;
+    int *info;
     void *dim_mem, *qp_mem, *sol_mem, *arg_mem, *ws_mem;
     struct d_ocp_qp_dim dim;
     struct d_ocp_qp qp;
@@ -40,23 +89,16 @@ typedef struct {
 
 void nmpc_qp_free(nmpc_qp *h);
 
-/* Q: (N+1) x nx diagonals (stage 0 ignored); R: N x nu diagonals. */
+/* Q: (N+1) x nx diagonals (stage 0 ignored); R: N x nu diagonals. warm_start: HPIPM's (0
+ * none, 1 primal, 2 primal and dual from the previous solution). Needs `nmpc_qp_load`. */
 nmpc_qp *nmpc_qp_create(int N, int nx, int nu, int ng, int nbx, const int *idxbx, int nbu,
                         const int *idxbu, const double *Q, const double *R, int mode,
-                        int iter_max, double tol, double mu0)
+                        int iter_max, double tol, double mu0, int warm_start)
 {
+    if (!hpipm_handle) return NULL;
     nmpc_qp *h = calloc(1, sizeof(nmpc_qp));
     if (!h) return NULL;
     h->N = N; h->nx = nx; h->nu = nu; h->ng = ng; h->nbx = nbx; h->nbu = nbu;
-    ALLOC(h->nx_k, N + 1); ALLOC(h->nu_k, N + 1); ALLOC(h->nbx_k, N + 1);
-    ALLOC(h->nbu_k, N + 1); ALLOC(h->ng_k, N + 1); ALLOC(h->ns_k, N + 1);
-    for (int k = 0; k <= N; k++) {
-        h->nx_k[k] = k == 0 ? 0 : nx;
-        h->nu_k[k] = k == N ? 0 : nu;
-        h->nbx_k[k] = k == 0 ? 0 : nbx;
-        h->nbu_k[k] = k == N ? 0 : nbu;
-        h->ng_k[k] = k == 0 ? 0 : ng;
-    }
     ALLOC(h->idxbx, nbx); memcpy(h->idxbx, idxbx, sizeof(int) * nbx);
     ALLOC(h->idxbu, nbu); memcpy(h->idxbu, idxbu, sizeof(int) * nbu);
     ALLOC(h->Qdense, (N + 1) * nx * nx); ALLOC(h->Rdense, N * nu * nu);
@@ -66,88 +108,119 @@ nmpc_qp *nmpc_qp_create(int N, int nx, int nu, int ng, int nbx, const int *idxbx
     for (int k = 0; k < N; k++)
         for (int i = 0; i < nu; i++) h->Rdense[k * nu * nu + i * nu + i] = R[k * nu + i];
 
-    ALLOC(h->hA, N + 1); ALLOC(h->hB, N + 1); ALLOC(h->hb, N + 1); ALLOC(h->hQ, N + 1);
-    ALLOC(h->hS, N + 1); ALLOC(h->hR, N + 1); ALLOC(h->hq, N + 1); ALLOC(h->hr, N + 1);
-    ALLOC(h->hlbx, N + 1); ALLOC(h->hubx, N + 1); ALLOC(h->hlbu, N + 1);
-    ALLOC(h->hubu, N + 1); ALLOC(h->hC, N + 1); ALLOC(h->hD, N + 1); ALLOC(h->hlg, N + 1);
-    ALLOC(h->hug, N + 1); ALLOC(h->hidxbx, N + 1); ALLOC(h->hidxbu, N + 1);
+    h->dim_mem = malloc(F.d_ocp_qp_dim_memsize(N));
+    F.d_ocp_qp_dim_create(N, &h->dim, h->dim_mem);
     for (int k = 0; k <= N; k++) {
-        h->hQ[k] = h->Qdense + k * nx * nx;
-        h->hR[k] = k < N ? h->Rdense + k * nu * nu : NULL;
-        h->hS[k] = h->Sdense;
-        h->hD[k] = h->Ddense;
-        h->hidxbx[k] = h->idxbx;
-        h->hidxbu[k] = h->idxbu;
+        F.d_ocp_qp_dim_set_nx(k, k == 0 ? 0 : nx, &h->dim);
+        F.d_ocp_qp_dim_set_nu(k, k == N ? 0 : nu, &h->dim);
+        F.d_ocp_qp_dim_set_nbx(k, k == 0 ? 0 : nbx, &h->dim);
+        F.d_ocp_qp_dim_set_nbu(k, k == N ? 0 : nbu, &h->dim);
+        F.d_ocp_qp_dim_set_ng(k, k == 0 ? 0 : ng, &h->dim);
     }
-
-    h->dim_mem = malloc(d_ocp_qp_dim_memsize(N));
-    d_ocp_qp_dim_create(N, &h->dim, h->dim_mem);
-    d_ocp_qp_dim_set_all(h->nx_k, h->nu_k, h->nbx_k, h->nbu_k, h->ng_k, h->ns_k, &h->dim);
-    h->qp_mem = malloc(d_ocp_qp_memsize(&h->dim));
-    d_ocp_qp_create(&h->dim, &h->qp, h->qp_mem);
-    h->sol_mem = malloc(d_ocp_qp_sol_memsize(&h->dim));
-    d_ocp_qp_sol_create(&h->dim, &h->sol, h->sol_mem);
-    h->arg_mem = malloc(d_ocp_qp_ipm_arg_memsize(&h->dim));
-    d_ocp_qp_ipm_arg_create(&h->dim, &h->arg, h->arg_mem);
-    d_ocp_qp_ipm_arg_set_default((enum hpipm_mode)mode, &h->arg);
-    d_ocp_qp_ipm_arg_set_iter_max(&iter_max, &h->arg);
-    d_ocp_qp_ipm_arg_set_tol_stat(&tol, &h->arg);
-    d_ocp_qp_ipm_arg_set_tol_eq(&tol, &h->arg);
-    d_ocp_qp_ipm_arg_set_tol_ineq(&tol, &h->arg);
-    d_ocp_qp_ipm_arg_set_tol_comp(&tol, &h->arg);
-    if (mu0 > 0) d_ocp_qp_ipm_arg_set_mu0(&mu0, &h->arg);
-    h->ws_mem = malloc(d_ocp_qp_ipm_ws_memsize(&h->dim, &h->arg));
-    d_ocp_qp_ipm_ws_create(&h->dim, &h->arg, &h->ws, h->ws_mem);
+    h->qp_mem = malloc(F.d_ocp_qp_memsize(&h->dim));
+    F.d_ocp_qp_create(&h->dim, &h->qp, h->qp_mem);
+    /* what never changes: the Hessian, the bounded indices, S = 0, D = 0 */
+    for (int k = 0; k <= N; k++) {
+        F.d_ocp_qp_set_Q(k, h->Qdense + k * nx * nx, &h->qp);
+        if (k < N) {
+            F.d_ocp_qp_set_R(k, h->Rdense + k * nu * nu, &h->qp);
+            F.d_ocp_qp_set_S(k, h->Sdense, &h->qp);
+            F.d_ocp_qp_set_idxbu(k, h->idxbu, &h->qp);
+        }
+        if (k > 0) {
+            F.d_ocp_qp_set_idxbx(k, h->idxbx, &h->qp);
+            F.d_ocp_qp_set_D(k, h->Ddense, &h->qp);
+        }
+    }
+    h->sol_mem = malloc(F.d_ocp_qp_sol_memsize(&h->dim));
+    F.d_ocp_qp_sol_create(&h->dim, &h->sol, h->sol_mem);
+    h->arg_mem = malloc(F.d_ocp_qp_ipm_arg_memsize(&h->dim));
+    F.d_ocp_qp_ipm_arg_create(&h->dim, &h->arg, h->arg_mem);
+    F.d_ocp_qp_ipm_arg_set_default((enum hpipm_mode)mode, &h->arg);
+    F.d_ocp_qp_ipm_arg_set_iter_max(&iter_max, &h->arg);
+    F.d_ocp_qp_ipm_arg_set_tol_stat(&tol, &h->arg);
+    F.d_ocp_qp_ipm_arg_set_tol_eq(&tol, &h->arg);
+    F.d_ocp_qp_ipm_arg_set_tol_ineq(&tol, &h->arg);
+    F.d_ocp_qp_ipm_arg_set_tol_comp(&tol, &h->arg);
+    if (mu0 > 0) F.d_ocp_qp_ipm_arg_set_mu0(&mu0, &h->arg);
+    F.d_ocp_qp_ipm_arg_set_warm_start(&warm_start, &h->arg);
+    h->ws_mem = malloc(F.d_ocp_qp_ipm_ws_memsize(&h->dim, &h->arg));
+    F.d_ocp_qp_ipm_ws_create(&h->dim, &h->arg, &h->ws, h->ws_mem);
     return h;
 }
 
-/* One QP. A: N x nx x nx (stage 0 unused), B: N x nx x nu, b: N x nx, q: (N+1) x nx
- * (stage 0 unused), r: N x nu, lbx/ubx: (N+1) x nbx (stage 0 unused), lbu/ubu: N x nbu,
- * C: (N+1) x ng x nx and lg/ug: (N+1) x ng (stage 0 unused).
- * Out: x (N+1) x nx (stage 0 left at 0), u N x nu; info = [status, iterations];
- * res = max residuals [stationarity, equality, inequality, complementarity]. */
-int nmpc_qp_solve(nmpc_qp *h, double *A, double *B, double *b, double *q, double *r,
+/* The arrays the blocks are read from and the solution written to. A: N x nx x nx (stage 0
+ * unused), B: N x nx x nu, b: N x nx, q: (N+1) x nx (stage 0 unused), r: N x nu,
+ * lbx/ubx: (N+1) x nbx (stage 0 unused), lbu/ubu: N x nbu, C: (N+1) x ng x nx and
+ * lg/ug: (N+1) x ng (stage 0 unused); x: (N+1) x nx (stage 0 left at 0), u: N x nu;
+ * info = [status, iterations]; res = max residuals [stat, eq, ineq, comp]. */
+void nmpc_qp_bind(nmpc_qp *h, double *A, double *B, double *b, double *q, double *r,
                   double *lbx, double *ubx, double *lbu, double *ubu, double *C, double *lg,
                   double *ug, double *x, double *u, int *info, double *res)
 {
+    h->A = A; h->B = B; h->b = b; h->q = q; h->r = r; h->lbx = lbx; h->ubx = ubx;
+    h->lbu = lbu; h->ubu = ubu; h->C = C; h->lg = lg; h->ug = ug; h->x = x; h->u = u;
+    h->info = info; h->res = res;
+}
+
+enum { SET_DYNAMICS = 1, SET_CONSTRAINTS = 2, SET_BOUNDS = 4, SET_GRADIENT = 8,
+       SET_LOWER_CONSTRAINTS = 16 };
+
+/* Copy the groups in `what` (a sum of the SET_ flags) of stages k0 <= k < k1 into the QP. */
+void nmpc_qp_set(nmpc_qp *h, int what, int k0, int k1)
+{
     int N = h->N, nx = h->nx, nu = h->nu, ng = h->ng, nbx = h->nbx, nbu = h->nbu;
-    for (int k = 0; k <= N; k++) {
-        h->hA[k] = k < N ? A + k * nx * nx : NULL;
-        h->hB[k] = k < N ? B + k * nx * nu : NULL;
-        h->hb[k] = k < N ? b + k * nx : NULL;
-        h->hq[k] = q + k * nx;
-        h->hr[k] = k < N ? r + k * nu : NULL;
-        h->hlbx[k] = lbx + k * nbx;
-        h->hubx[k] = ubx + k * nbx;
-        h->hlbu[k] = k < N ? lbu + k * nbu : NULL;
-        h->hubu[k] = k < N ? ubu + k * nbu : NULL;
-        h->hC[k] = C + k * ng * nx;
-        h->hlg[k] = lg + k * ng;
-        h->hug[k] = ug + k * ng;
+    struct d_ocp_qp *qp = &h->qp;
+    for (int k = k0; k < k1 && k <= N; k++) {
+        if ((what & SET_DYNAMICS) && k < N) {
+            if (k > 0) F.d_ocp_qp_set_A(k, h->A + k * nx * nx, qp);
+            F.d_ocp_qp_set_B(k, h->B + k * nx * nu, qp);
+            F.d_ocp_qp_set_b(k, h->b + k * nx, qp);
+        }
+        if (k > 0 && (what & SET_CONSTRAINTS)) {
+            F.d_ocp_qp_set_C(k, h->C + k * ng * nx, qp);
+            F.d_ocp_qp_set_ug(k, h->ug + k * ng, qp);
+        }
+        if (k > 0 && (what & (SET_CONSTRAINTS | SET_LOWER_CONSTRAINTS)))
+            F.d_ocp_qp_set_lg(k, h->lg + k * ng, qp);
+        if (what & SET_BOUNDS) {
+            if (k > 0) {
+                F.d_ocp_qp_set_lbx(k, h->lbx + k * nbx, qp);
+                F.d_ocp_qp_set_ubx(k, h->ubx + k * nbx, qp);
+            }
+            if (k < N) {
+                F.d_ocp_qp_set_lbu(k, h->lbu + k * nbu, qp);
+                F.d_ocp_qp_set_ubu(k, h->ubu + k * nbu, qp);
+            }
+        }
+        if (what & SET_GRADIENT) {
+            if (k > 0) F.d_ocp_qp_set_q(k, h->q + k * nx, qp);
+            if (k < N) F.d_ocp_qp_set_r(k, h->r + k * nu, qp);
+        }
     }
-    d_ocp_qp_set_all(h->hA, h->hB, h->hb, h->hQ, h->hS, h->hR, h->hq, h->hr, h->hidxbx,
-                     h->hlbx, h->hubx, h->hidxbu, h->hlbu, h->hubu, h->hC, h->hD, h->hlg,
-                     h->hug, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, &h->qp);
-    d_ocp_qp_ipm_solve(&h->qp, &h->sol, &h->arg, &h->ws);
-    d_ocp_qp_ipm_get_status(&h->ws, &info[0]);
-    d_ocp_qp_ipm_get_iter(&h->ws, &info[1]);
-    d_ocp_qp_ipm_get_max_res_stat(&h->ws, &res[0]);
-    d_ocp_qp_ipm_get_max_res_eq(&h->ws, &res[1]);
-    d_ocp_qp_ipm_get_max_res_ineq(&h->ws, &res[2]);
-    d_ocp_qp_ipm_get_max_res_comp(&h->ws, &res[3]);
-    memset(x, 0, sizeof(double) * nx);
-    for (int k = 1; k <= N; k++) d_ocp_qp_sol_get_x(k, &h->sol, x + k * nx);
-    for (int k = 0; k < N; k++) d_ocp_qp_sol_get_u(k, &h->sol, u + k * nu);
-    return info[0];
+}
+
+/* Solve the QP as it is now; the result goes to the bound x, u, info and res. */
+int nmpc_qp_solve(nmpc_qp *h)
+{
+    int N = h->N, nx = h->nx, nu = h->nu;
+    F.d_ocp_qp_ipm_solve(&h->qp, &h->sol, &h->arg, &h->ws);
+    F.d_ocp_qp_ipm_get_status(&h->ws, &h->info[0]);
+    F.d_ocp_qp_ipm_get_iter(&h->ws, &h->info[1]);
+    F.d_ocp_qp_ipm_get_max_res_stat(&h->ws, &h->res[0]);
+    F.d_ocp_qp_ipm_get_max_res_eq(&h->ws, &h->res[1]);
+    F.d_ocp_qp_ipm_get_max_res_ineq(&h->ws, &h->res[2]);
+    F.d_ocp_qp_ipm_get_max_res_comp(&h->ws, &h->res[3]);
+    memset(h->x, 0, sizeof(double) * nx);
+    for (int k = 1; k <= N; k++) F.d_ocp_qp_sol_get_x(k, &h->sol, h->x + k * nx);
+    for (int k = 0; k < N; k++) F.d_ocp_qp_sol_get_u(k, &h->sol, h->u + k * nu);
+    return h->info[0];
 }
 
 void nmpc_qp_free(nmpc_qp *h)
 {
     if (!h) return;
-    void *blocks[] = {h->nx_k, h->nu_k, h->nbx_k, h->nbu_k, h->ng_k, h->ns_k, h->idxbx,
-                      h->idxbu, h->Qdense, h->Rdense, h->Sdense, h->Ddense, h->hA, h->hB,
-                      h->hb, h->hQ, h->hS, h->hR, h->hq, h->hr, h->hlbx, h->hubx, h->hlbu,
-                      h->hubu, h->hC, h->hD, h->hlg, h->hug, h->hidxbx, h->hidxbu,
+    void *blocks[] = {h->idxbx, h->idxbu, h->Qdense, h->Rdense, h->Sdense, h->Ddense,
                       h->dim_mem, h->qp_mem, h->sol_mem, h->arg_mem, h->ws_mem};
     for (size_t i = 0; i < sizeof(blocks) / sizeof(blocks[0]); i++) free(blocks[i]);
     free(h);

@@ -314,6 +314,11 @@ class Ocp:
     jac_gather: np.ndarray  # dg/dw nonzeros = [dgap_nz, dh_nz, -1][jac_gather]
     dynamics: ca.Function
     states_at: np.ndarray  # (Np+1, NX) indices of x_k in w
+    hpipm_linearisation: ca.Function  # (w, p) -> (b, A, B, lg, C): the QP's blocks as hpipm
+    # takes them, dense, column-major, a stage after another (see `HpipmOcpQp`)
+    first_stage: ca.Function  # (x_0, u_0, x_1, p) -> (b_0, A_0, B_0): stage 0 alone
+    hpipm_clearance: ca.Function  # (w, p) -> (lg, C): the obstacle rows alone
+    dynamics_params: np.ndarray  # where in p the dynamics' parameters are (boat, current, bias)
     inputs_at: np.ndarray  # (Np, NU) indices of u_k in w
 
     @property
@@ -409,6 +414,14 @@ def _with_jacobian(f: ca.Function, wrt: list[int]) -> tuple[ca.Function, ca.Spar
     return ca.Function(name, args, [out, ca.vertcat(*jac.nonzeros())]), jac.sparsity()
 
 
+def _with_dense_jacobians(f: ca.Function, wrt: list[int]) -> ca.Function:
+    """f's first output and its dense Jacobians with respect to each input in `wrt`."""
+    args = f.sx_in()
+    out = f.call(args)[0]
+    jacs = [ca.densify(ca.jacobian(out, args[i])) for i in wrt]
+    return ca.Function(f.name() + "_dense_jac", args, [out, *jacs])
+
+
 def _stage_blocks(sparsity: ca.Sparsity, row0: int, col0: int, src0: int):
     """(rows, cols, source index) of a stage block's nonzeros in the big Jacobian."""
     rows, cols = sparsity.get_triplet()
@@ -469,8 +482,28 @@ def build_ocp(config: NmpcConfig) -> Ocp:
     order = np.lexsort((rows, cols))  # column-major, as CasADi stores sparse matrices
     jac_sparsity = ca.Sparsity.triplet(g.numel(), nw, rows[order].tolist(), cols[order].tolist())
 
+    # the same blocks dense, in the layout hpipm takes (stage after stage, column-major), so
+    # that a Function buffer writes them straight into the QP's arrays
+    f_d_dense = _with_dense_jacobians(f_d, [0, 1])
+    X_next_d, A_d, B_d = f_d_dense.map(N)(X[:, :N], U, ca.repmat(boat, 1, N),
+                                          ca.repmat(current, 1, N), ca.repmat(bias, 1, N))
+    clearance_dense = _with_dense_jacobians(clearance, [0])
+    H_d, C_d = clearance_dense.map(N)(X[:, 1:], ca.repmat(slots, 1, N),
+                                      ca.repmat(p[layout.geometry], 1, N), vessels)
+    hpipm_linearisation = ca.Function(
+        "nmpc_hpipm_linearisation", [w, p], [X_next_d - X[:, 1:], A_d, B_d, -H_d, C_d],
+        ["w", "p"], ["b", "A", "B", "lg", "C"])
+    hpipm_clearance = ca.Function("nmpc_hpipm_clearance", [w, p], [-H_d, C_d], ["w", "p"],
+                                  ["lg", "C"])
+    x0, u0, x1 = ca.MX.sym("x0", NX), ca.MX.sym("u0", NU), ca.MX.sym("x1", NX)
+    x_next0, A0, B0 = f_d_dense(x0, u0, boat, current, bias)
+    first_stage = ca.Function("nmpc_first_stage", [x0, u0, x1, p], [x_next0 - x1, A0, B0],
+                              ["x0", "u0", "x1", "p"], ["b0", "A0", "B0"])
+
     return Ocp(
-        config=config, nw=nw, ng=g.numel(), n_gap=NX, n_h=n_h,
+        config=config, hpipm_linearisation=hpipm_linearisation, first_stage=first_stage,
+        hpipm_clearance=hpipm_clearance, dynamics_params=np.r_[np.arange(layout.boat.start,
+        layout.current.stop), np.arange(layout.bias.start, layout.bias.stop)], nw=nw, ng=g.numel(), n_gap=NX, n_h=n_h,
         constraints=ca.Function("constraints", [w, p], [g], ["w", "p"], ["g"]),
         linearisation=ca.Function("nmpc_linearisation", [w, p], [gaps, AB, H, C],
                                   ["w", "p"], ["gaps", "dgap_nz", "h", "dh_nz"]),

@@ -37,6 +37,9 @@ class QpOptions:
     solver: str = "hpipm"
     hpipm_mode: str = "speed_abs"  # absolute IPM: about half the iterations of "speed" here
     tol: float = 1e-4  # on HPIPM's residuals (direct hpipm only); 1e-6 costs 3 more iterations
+    warm_start: int = 0  # HPIPM's warm start (direct hpipm only): 0 none, 1 primal, 2 primal-dual
+    hpipm_build: str = "auto"  # which HPIPM + BLASFEO (`hpipm_qp.HPIPM_BUILDS`): "auto" takes
+    # the one tuned for the CPU when installed, else casadi's
     mu0: float = 0.0  # HPIPM's initial barrier (direct hpipm only); 0: its default (1e3 was
     # better on one QP but took 7.2 iterations against 5.6 over the bench run)
     iter_max: int = 50
@@ -47,6 +50,13 @@ class QpOptions:
             raise InputError(f"QP solver {self.solver!r}: choose one of {', '.join(QP_SOLVERS)}")
         if self.iter_max < 1:
             raise InputError(f"QP iter_max: must be positive, got {self.iter_max!r}")
+        if self.warm_start not in (0, 1, 2):
+            raise InputError(f"QP warm_start: 0, 1 or 2, got {self.warm_start!r}")
+        from .hpipm_qp import HPIPM_BUILDS
+
+        if self.hpipm_build not in HPIPM_BUILDS:
+            raise InputError(f"QP hpipm_build {self.hpipm_build!r}: choose one of "
+                             f"{', '.join(HPIPM_BUILDS)}")
         if not self.tol > 0:
             raise InputError(f"QP tol: must be positive, got {self.tol!r}")
 
@@ -77,8 +87,12 @@ def _bind(function: ca.Function, inputs: list[np.ndarray]):
 class QpStep:
     """The linearise-and-solve step of SQP, with its buffers set up once."""
 
-    def __init__(self, ocp: Ocp, linearisation: ca.Function, options: QpOptions = QpOptions()):
+    def __init__(self, ocp: Ocp, linearisation: ca.Function, options: QpOptions = QpOptions(),
+                 compile=None):
+        """compile(Function) -> Function: the compiled form of the direct HPIPM path's
+        linearisations (default: interpreted)."""
         self.ocp, self.options = ocp, options
+        compile = compile or (lambda f: f)
         N, n = ocp.N, ocp.nw
         self.hessian = ocp.hessian()
         self.lbg, self.ubg = ocp.constraint_bounds()
@@ -92,6 +106,9 @@ class QpStep:
         self._lin_buf, self._lin, self.pieces = _bind(linearisation, [self.w, self.p])
 
         if options.solver == "hpipm":
+            self._hpipm_lin = compile(ocp.hpipm_linearisation)
+            self._first_stage = compile(ocp.first_stage)
+            self._hpipm_clearance = compile(ocp.hpipm_clearance)
             try:
                 self._init_hpipm()
             except (OSError, subprocess.CalledProcessError) as exc:
@@ -106,47 +123,144 @@ class QpStep:
 
     # -- HPIPM directly, stage by stage -------------------------------------------------------
     def _init_hpipm(self) -> None:
-        from .hpipm_qp import HpipmOcpQp
+        from .hpipm_qp import HpipmOcpQp, choose_build
 
         ocp, o = self.ocp, self.options
         N, nx, nu, nh = ocp.N, NX, NU, ocp.n_h
         self.bounded_states = np.array([6, 7, 8])  # nT, nS, slack
         self.qp = HpipmOcpQp(N, nx, nu, nh, self.bounded_states, np.arange(nu),
                              self.hessian[self.states_at], self.hessian[self.inputs_at],
-                             o.hpipm_mode, o.iter_max, o.tol, o.mu0)
-        rows, cols = (np.asarray(v) for v in ocp.dyn_sparsity.get_triplet())
-        self._in_A = cols < nx
-        self._A_at = cols[self._in_A] * nx + rows[self._in_A]
-        self._B_at = (cols[~self._in_A] - nx) * nx + rows[~self._in_A]
-        rows, cols = (np.asarray(v) for v in ocp.h_sparsity.get_triplet())
-        self._C_at = cols * nh + rows
+                             o.hpipm_mode, o.iter_max, o.tol, o.mu0, o.warm_start,
+                             choose_build(o.hpipm_build))
         self.qp.ug[:] = o.inf
+        self._bind_hpipm()
         self._solve = self._solve_hpipm
 
+    def _bind_hpipm(self) -> None:
+        """Function buffers that write the QP's blocks straight into its arrays: the whole
+        horizon at w, and stage 0 alone (the feedback's part)."""
+        qp, N, nx, nu = self.qp, self.ocp.N, NX, NU
+        self._bound_qp = qp
+        self._hl_w, self._hl_p = np.zeros(self.ocp.nw), np.zeros(self.p.size)
+        outs = [qp.b, qp.A, qp.B, qp.lg[1:], qp.C[1:]]
+        self._hl_buf, self._hl = self._bind_out(self._hpipm_lin, [self._hl_w, self._hl_p], outs)
+        self._fs_x0, self._fs_u0, self._fs_x1 = np.zeros(nx), np.zeros(nu), np.zeros(nx)
+        outs = [qp.b[0], qp.A[0], qp.B[0]]
+        self._fs_buf, self._fs = self._bind_out(
+            self._first_stage, [self._fs_x0, self._fs_u0, self._fs_x1, self._hl_p], outs)
+        self._cl_buf, self._cl = self._bind_out(self._hpipm_clearance,
+                                                [self._hl_w, self._hl_p], [qp.lg[1:], qp.C[1:]])
+        self._dyn_p = self.ocp.dynamics_params
+        self._grad = np.zeros(self.ocp.nw)
+        self._lo, self._hi = np.zeros(self.ocp.nw), np.zeros(self.ocp.nw)
+        self._dw = np.zeros(self.ocp.nw)
+        self._bx_at = self.states_at[:, self.bounded_states]
+        self._x1_at, self._u0_at = self.states_at[1], self.inputs_at[0]
+        self.prepared = False
+
+    @staticmethod
+    def _bind_out(function: ca.Function, inputs, outputs):
+        buf, trigger = function.buffer()
+        for i, array in enumerate(inputs):
+            buf.set_arg(i, memoryview(array))
+        for i, array in enumerate(outputs):
+            assert array.flags.c_contiguous and array.size == function.nnz_out(i)
+            buf.set_res(i, memoryview(array.reshape(-1)))
+        return buf, trigger
+
+    def _linearise_hpipm(self, w, p) -> None:
+        if self._bound_qp is not self.qp:  # the QP was swapped (tests): bind the new one
+            self._bind_hpipm()
+        self._hl_w[:] = w
+        self._hl_p[:] = p
+        self._hl()
+
+    def _set_bounds(self, w, lbw, ubw) -> None:
+        qp = self.qp
+        np.subtract(lbw, w, out=self._lo)
+        np.subtract(ubw, w, out=self._hi)
+        np.take(self._lo, self._bx_at, out=qp.lbx)
+        np.take(self._hi, self._bx_at, out=qp.ubx)
+        np.take(self._lo, self.inputs_at, out=qp.lbu)
+        np.take(self._hi, self.inputs_at, out=qp.ubu)
+
+    def _set_gradient(self, w, w_ref) -> None:
+        qp = self.qp
+        np.subtract(w, w_ref, out=self._grad)
+        np.multiply(self.hessian, self._grad, out=self._grad)
+        np.take(self._grad, self.states_at, out=qp.q)
+        np.take(self._grad, self.inputs_at, out=qp.r)
+
     def _solve_hpipm(self, w, w_ref, lbw, ubw) -> tuple[np.ndarray, bool, str, int]:
-        N, qp = self.ocp.N, self.qp
-        gaps, dgap, h, dh = self.pieces
-        dgap = dgap.reshape(N, -1)
-        qp.A[:, self._A_at] = dgap[:, self._in_A]
-        qp.B[:, self._B_at] = dgap[:, ~self._in_A]
-        qp.b[:] = gaps.reshape(N, NX)
-        qp.C[1:, self._C_at] = dh.reshape(N, -1)
-        np.negative(h.reshape(N, -1), out=qp.lg[1:])
-        grad = self.hessian * (w - w_ref)
-        qp.q[:] = grad[self.states_at]
-        qp.r[:] = grad[self.inputs_at]
-        lo, hi = lbw - w, ubw - w
-        qp.lbx[:] = lo[self.states_at[:, self.bounded_states]]
-        qp.ubx[:] = hi[self.states_at[:, self.bounded_states]]
-        qp.lbu[:] = lo[self.inputs_at]
-        qp.ubu[:] = hi[self.inputs_at]
-        status, iterations = qp.solve()
-        dw = np.zeros_like(w)
-        dw[self.states_at[1:]] = qp.x[1:]
-        dw[self.inputs_at] = qp.u
+        """The QP at w, all of it set afresh (the pieces are linearised at w)."""
+        from .hpipm_qp import SET_BOUNDS, SET_CONSTRAINTS, SET_DYNAMICS, SET_GRADIENT
+
+        self.prepared = False  # the blocks are now those of w
+        self._set_bounds(w, lbw, ubw)
+        self._set_gradient(w, w_ref)
+        self.qp.set(SET_DYNAMICS | SET_CONSTRAINTS | SET_BOUNDS | SET_GRADIENT)
+        return self._hpipm_result()
+
+    def _hpipm_result(self) -> tuple[np.ndarray, bool, str, int]:
         from .hpipm_qp import STATUS
 
-        return dw, status == 0, STATUS.get(status, str(status)), iterations
+        qp = self.qp
+        status, iterations = qp.solve()
+        dw = self._dw
+        dw[self.states_at[1:]] = qp.x[1:]
+        dw[self.inputs_at] = qp.u
+        dw[self.x0_at] = 0.0
+        return dw.copy(), status == 0, STATUS.get(status, str(status)), iterations
+
+    # -- the real-time iteration split: preparation, then feedback ---------------------------
+    def prepare(self, w: np.ndarray, p: np.ndarray, lbw: np.ndarray, ubw: np.ndarray) -> bool:
+        """Linearise at the guess w (x_0 there is the predicted state) with parameters p and
+        set up the QP but for stage 0's dynamics and the gradient. False when the QP solver
+        does not split (CasADi's conic ones): `feedback` then does everything."""
+        if self._solve != self._solve_hpipm:
+            return False
+        from .hpipm_qp import SET_BOUNDS, SET_CONSTRAINTS, SET_DYNAMICS
+
+        self._linearise_hpipm(w, p)
+        self._set_bounds(w, lbw, ubw)
+        self.qp.set(SET_DYNAMICS | SET_CONSTRAINTS | SET_BOUNDS, 1)
+        self.prepared = True
+        return True
+
+    def can_feed_back(self, w: np.ndarray, p: np.ndarray) -> bool:
+        """The prepared QP serves w and p: prepared at the same w but for x_0 (which the
+        feedback embeds), with the same dynamics parameters (boat, current, bias; other
+        segments or vessels only make the feedback linearise the obstacle rows anew)."""
+        if not self.prepared or self._bound_qp is not self.qp:
+            return False
+        dyn = self._dyn_p
+        return (np.array_equal(w[NX:], self._hl_w[NX:])
+                and np.array_equal(p[dyn], self._hl_p[dyn]))
+
+    def feedback(self, w: np.ndarray, p: np.ndarray, w_ref: np.ndarray) -> QpStepResult:
+        """The QP prepared at w but for x_0: stage 0 linearised at the new x_0 (as `solve`
+        does), the obstacle rows anew if p's segments or vessels changed, the gradient from
+        w_ref, one solve: the QP `solve` would set up. Needs `can_feed_back(w, p)`."""
+        from .hpipm_qp import SET_CONSTRAINTS, SET_DYNAMICS, SET_GRADIENT
+
+        t0 = time.perf_counter()
+        if not np.array_equal(p, self._hl_p):
+            self._hl_p[:] = p
+            self._cl()
+            self.qp.set(SET_CONSTRAINTS, 1)
+        self._fs_x0[:] = w[self.x0_at]
+        np.take(w, self._u0_at, out=self._fs_u0)
+        np.take(w, self._x1_at, out=self._fs_x1)
+        self._fs()
+        t1 = time.perf_counter()
+        self._set_gradient(w, w_ref)
+        self.qp.set(SET_DYNAMICS | SET_GRADIENT, 0, 1)
+        self.qp.set(SET_GRADIENT, 1)
+        self.prepared = False  # stage 0 and the gradient are now this state's
+        dw, ok, status, iterations = self._hpipm_result()
+        t2 = time.perf_counter()
+        ok = ok and bool(np.isfinite(dw).all())
+        return QpStepResult(dw, ok, status, iterations, t1 - t0, t2 - t1)
 
     # -- any QP solver through CasADi's conic interface ---------------------------------------
     def _init_conic(self) -> None:
@@ -195,9 +309,12 @@ class QpStep:
         t0 = time.perf_counter()
         w_caller, w = w, np.array(w, float)
         w[self.x0_at] = lbw[self.x0_at]
-        self.w[:] = w
-        self.p[:] = p
-        self._lin()
+        if self._solve == self._solve_hpipm:
+            self._linearise_hpipm(w, p)
+        else:
+            self.w[:] = w
+            self.p[:] = p
+            self._lin()
         t1 = time.perf_counter()
         dw, ok, status, iterations = self._solve(w, w_ref, lbw, ubw)
         t2 = time.perf_counter()

@@ -139,6 +139,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
 
     command = np.zeros(2)
     rows_t, rows_clear, rows_cmd, rows_xt, solve_s = [], [], [], [], []
+    phases: list[tuple] = []  # NMPC (feedback, preparation, step) seconds, fed back
     rows_waiting, rows_speed = [], []
     rows_water: list[tuple] = []  # (time, true current N, E, estimated N, E) per step
     field = cfg.current_field
@@ -186,6 +187,9 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
             true_current = field.at(out.state[:2]) if field is not None else np.asarray(
                 cfg.current_ne, float)
             solve_s.append(t2 - t1)
+            if decision.stats.get("feedback_s") is not None:  # the NMPC's two phases
+                phases.append((decision.stats["feedback_s"], decision.stats["preparation_s"],
+                               decision.stats["nmpc_step_s"], decision.stats["fed_back"]))
             if not decision.ok:
                 status = f"controller failed: {decision.status}"
                 command = np.zeros(2)
@@ -329,6 +333,11 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
         "real_time_factor": duration / wall if wall > 0 else None,
         "where_the_time_goes_s": {k: round(v, 4) for k, v in sorted(timer.total.items())},
     }
+    if phases:
+        for i, key in enumerate(("feedback_latency_ms", "preparation_ms", "nmpc_step_ms")):
+            ph = metrics.TimingStats.of([row[i] for row in phases])
+            timing[key] = {"mean": ph.mean_ms, "p99": ph.p99_ms, "max": ph.max_ms}
+        timing["fed_back_steps"] = int(sum(row[3] for row in phases))
     behind = getattr(perception, "time_s", None)  # the LiDAR's own time, maybe on another core
     if behind is not None:
         timing["perception"] = {

@@ -94,7 +94,10 @@ class NmpcController:
             slack_m=st.max_slack_m, segments_used=segments,
             stats={"qp_iterations": st.stats.qp_iterations, "fallback": st.stats.fallback,
                    "segments_dropped": st.stats.segments_dropped, "waiting": st.stats.waiting,
-                   "water": water, "estimator_s": estimator_s, "rules": st.stats.rules},
+                   "water": water, "estimator_s": estimator_s, "rules": st.stats.rules,
+                   "feedback_s": st.stats.time_feedback_s,
+                   "preparation_s": st.stats.time_preparation_s,
+                   "nmpc_step_s": st.stats.time_total_s, "fed_back": st.stats.fed_back},
         )
 
 

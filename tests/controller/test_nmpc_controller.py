@@ -303,16 +303,18 @@ def test_a_failed_warm_start_is_retried_from_the_safe_guess(monkeypatch):
     ctl = NmpcController(CFG)
     first = ctl.step(X0, ACT0, segs, canal.waypoints, 2.0)
     calls = []
-    original = type(ctl._qp).solve
 
-    def fail_once(self, *args):
-        r = original(self, *args)
-        calls.append(r.ok)
-        if len(calls) == 1:
-            return QpStepResult(r.dw * np.nan, False, "forced", 0, 0.0, 0.0)
-        return r
+    def fail_once(original):  # the first QP of the step fails, whichever phase solves it
+        def wrapped(self, *args):
+            r = original(self, *args)
+            calls.append(r.ok)
+            if len(calls) == 1:
+                return QpStepResult(r.dw * np.nan, False, "forced", 0, 0.0, 0.0)
+            return r
+        return wrapped
 
-    monkeypatch.setattr(type(ctl._qp), "solve", fail_once)
+    monkeypatch.setattr(type(ctl._qp), "solve", fail_once(type(ctl._qp).solve))
+    monkeypatch.setattr(type(ctl._qp), "feedback", fail_once(type(ctl._qp).feedback))
     second = ctl.step(X0, first.command, segs, canal.waypoints, 2.0)
     assert second.stats.ok and second.stats.fallback == "safe_guess"
     assert len(calls) == 2 and ctl.consecutive_failures == 0
@@ -342,3 +344,24 @@ def test_without_the_direct_hpipm_interface_casadis_is_used(monkeypatch):
     canal = straight_canal(width_m=20.0)
     step = ctl.step(X0, ACT0, canal.segments(), canal.waypoints, 2.0)
     assert step.stats.ok
+
+
+def test_the_split_step_gives_the_unsplit_answer_and_feeds_back_from_the_preparation():
+    """prepare/feedback (what step does) against one-phase RTI: the same plans, the
+    feedback uses the prepared QP, and a changed segment set is linearised anew."""
+    canal = straight_canal(width_m=20.0)
+    segs = canal.segments()
+    split, plain = NmpcController(CFG), NmpcController(CFG, split=False)
+    x, act = X0.copy(), ACT0.copy()
+    for k in range(6):
+        if k == 4:
+            segs = segs[:-2]  # two segments fewer: other slots than prepared
+        a = split.feedback(x, act, segs, canal.waypoints, 2.0)
+        split.prepare()
+        b = plain.step(x, act, segs, canal.waypoints, 2.0)
+        assert a.stats.ok and b.stats.ok
+        assert np.abs(a.states - b.states).max() < 1e-6
+        assert a.stats.fed_back == (k > 0) and not b.stats.fed_back
+        assert a.stats.time_feedback_s > 0 and (k == 0 or a.stats.time_preparation_s > 0)
+        x = b.states[1] * 0.1 + b.states[0] * 0.9  # somewhere along the plan, not on it
+        x, act = x[:6].copy(), b.command
