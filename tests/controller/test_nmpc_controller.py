@@ -351,7 +351,7 @@ def test_the_split_step_gives_the_unsplit_answer_and_feeds_back_from_the_prepara
     feedback uses the prepared QP, and a changed segment set is linearised anew."""
     canal = straight_canal(width_m=20.0)
     segs = canal.segments()
-    split, plain = NmpcController(CFG), NmpcController(CFG, split=False)
+    split, plain = NmpcController(CFG, split=True), NmpcController(CFG, split=False)
     x, act = X0.copy(), ACT0.copy()
     for k in range(6):
         if k == 4:
