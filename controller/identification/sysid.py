@@ -513,12 +513,20 @@ def _covariance(datas, free, est: BoatParams, scales, wa, x0s, f_d, active, stra
     A = J.T @ (wrow[:, None] * J)
     B = J.T @ ((wrow**2 * sigma2)[:, None] * J)
     B += _autocorrelation_terms(J, resid * wrow, np.concatenate(series_rows))
-    A_inv = _safe_inverse(A)
-    S = np.array([scales[n] for n in free])
-    cov = (A_inv @ B @ A_inv)[:n_free, :n_free] * np.outer(S, S)
-    # information about the parameters with the initial states profiled out (Schur complement)
-    Att, Atz, Azz = A[:n_free, :n_free], A[:n_free, n_free:], A[n_free:, n_free:]
-    info = Att - Atz @ _safe_inverse(Azz) @ Atz.T if Azz.size else Att
+    try:
+        if not (np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
+            raise np.linalg.LinAlgError("non-finite sensitivities")
+        A_inv = _safe_inverse(A)
+        S = np.array([scales[n] for n in free])
+        cov = (A_inv @ B @ A_inv)[:n_free, :n_free] * np.outer(S, S)
+        # information about the parameters with the initial states profiled out (Schur
+        # complement)
+        Att, Atz, Azz = A[:n_free, :n_free], A[:n_free, n_free:], A[n_free:, n_free:]
+        info = Att - Atz @ _safe_inverse(Azz) @ Atz.T if Azz.size else Att
+    except np.linalg.LinAlgError:
+        # The data say nothing usable about these parameters at this optimum (a degenerate
+        # or diverged fit): unknown spreads, so a trial term is not kept on them.
+        return np.diag(np.full(n_free, np.inf)), np.zeros((n_free, n_free)), rms
     return cov, info, rms
 
 
@@ -807,7 +815,7 @@ def result_to_dict(result: SysidResult) -> dict:
     """A JSON-ready summary of the result (SI units, angles of the fit report in degrees)."""
 
     def clean(v):
-        return None if v is None or (isinstance(v, float) and math.isnan(v)) else v
+        return None if v is None or (isinstance(v, float) and not math.isfinite(v)) else v
 
     return {
         "anchor": result.anchor,

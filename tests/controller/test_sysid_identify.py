@@ -133,3 +133,20 @@ def test_identification_is_deterministic():
     a, b = sysid.identify([log], config), sysid.identify([log], config)
     assert a.params == b.params
     assert [r.std_error for r in a.parameters][:9] == [r.std_error for r in b.parameters][:9]
+
+
+
+def test_a_covariance_that_cannot_be_computed_is_unknown_not_a_traceback(monkeypatch):
+    """When the information matrix cannot be decomposed (NumPy's eigh did not converge on a
+    diverged trial fit of a noisy DataFlash log), the spreads are unknown (infinite) and the
+    identification still ends with its table; nothing raises."""
+    def fails(*_a, **_k):
+        raise np.linalg.LinAlgError("Eigenvalues did not converge")
+
+    monkeypatch.setattr(sysid, "_safe_inverse", fails)
+    log = m.generate(seed=1, noise="realistic", runs=(m.QUICK_RUNS[0],))["01_acceleration"]
+    res = sysid.identify([log], sysid.SysidConfig(fixed={"m22": 1800.0}))
+    rows = {r.name: r for r in res.parameters}
+    assert {"Xu", "Xuu", "c"} <= set(rows)
+    assert all(math.isfinite(rows[n].estimate) for n in ("Xu", "Xuu", "c"))
+    assert all(rows[n].std_error == math.inf for n in ("Xu", "Xuu", "c"))
