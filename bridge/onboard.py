@@ -44,7 +44,8 @@ class BridgeOptions:
 
     connect: str = ""
     scenario: str | Path | None = None
-    lidar: str = "sim"
+    lidar: str | tuple = "sim"  # one source, or several (merged; see bridge.lidar)
+    lidar_config: str | Path | None = None  # --lidar-config FILE (else the scenario's [lidar])
     arm: bool = False
     mode: str | None = None
     signing_key: str | Path | None = None
@@ -395,7 +396,11 @@ class OnboardLoop:
         state = link.state
         age, delay = link.state_age_s, link.link_delay_s
         pred = predict_vector(state.vector, age + delay)
-        view = self.perception.update(t, self.lidar.scan(t, pred), pred)
+        cloud = self.lidar.scan(t, pred)
+        lost = self._lidar_health(t)
+        if lost is not None:
+            return lost
+        view = self.perception.update(t, cloud, pred)
         segs = view.segments
         t0 = time.perf_counter()
         extra = {k: v for k, v in (("blind", view.blind), ("vessels", view.tracks))
@@ -421,6 +426,17 @@ class OnboardLoop:
         self.steps += 1
         self._show(step)
         return None
+
+    def _lidar_health(self, t: float) -> str | None:
+        """What a merged LiDAR source has to say (a sensor silent or back, malformed packets
+        skipped) to the log, console and ground station; its failsafe reason, if any."""
+        hb = self.link.heartbeat
+        for text, severity in getattr(self.lidar, "pop_notices", list)():
+            self.log.event(t, text, hb.mode if hb else "", hb.armed if hb else None)
+            self.link.statustext(f"canalnav: {text}"[:200], severity)
+            self._say(f"bridge: {text}")
+        lost = getattr(self.lidar, "lost", None)
+        return lost(t) if lost is not None else None
 
     def _tell_waiting(self, t: float, waiting: str) -> None:
         """When the NMPC starts or stops holding the boat short of a blocked way (or blind),
@@ -514,7 +530,7 @@ def run_bridge(options: BridgeOptions, console=sys.stderr) -> BridgeResult:
     prepare, run; the link and logs are closed whatever happens."""
     from bridge.ardupilot import MODES
     from bridge.clock import RealClock
-    from bridge.lidar_source import make_lidar_source
+    from bridge.lidar import build_lidar
     from bridge.link import AutopilotLink
     from scenarios.loop.controllers import NmpcController
     from scenarios.scenario_file import load_scenario
@@ -538,7 +554,7 @@ def run_bridge(options: BridgeOptions, console=sys.stderr) -> BridgeResult:
         from bridge.signing import load_signing_key
 
         key = load_signing_key(options.signing_key)
-    lidar = make_lidar_source(options.lidar, scenario, options.seed)
+    lidar = build_lidar(options.lidar, options.lidar_config, scenario, options.seed)
     log_dir = None if options.log_dir is None else Path(options.log_dir)
     if log_dir is not None:
         log_dir.mkdir(parents=True, exist_ok=True)
@@ -560,3 +576,4 @@ def run_bridge(options: BridgeOptions, console=sys.stderr) -> BridgeResult:
         if log is not None:
             log.close()
         link.close()
+        getattr(lidar, "close", lambda: None)()
