@@ -22,9 +22,11 @@ def pointcloud2(typestore, stamp_s: float, points, times_s=None, frame_id="lidar
     if times_s is not None:
         rec["t"] = np.round((np.asarray(times_s, float) - stamp_s) * 1e9).clip(0, 2**32 - 1)
     sec = int(np.floor(stamp_s))
-    header = types["std_msgs/msg/Header"](
+    header_type = types["std_msgs/msg/Header"]
+    extra = {"seq": 0} if "seq" in header_type.__dataclass_fields__ else {}  # ROS 1
+    header = header_type(
         stamp=types["builtin_interfaces/msg/Time"](sec=sec, nanosec=int(round((stamp_s - sec) * 1e9))),
-        frame_id=frame_id)
+        frame_id=frame_id, **extra)
     field = types["sensor_msgs/msg/PointField"]
     fields = [field(name=n, offset=POINT_DTYPE.fields[n][1], datatype=FLOAT32 if n != "t" else UINT32,
                     count=1) for n in POINT_DTYPE.names]

@@ -84,13 +84,13 @@ def sweep_packets(grid: np.ndarray, start_us: float, reflectivity: int = 100) ->
 
 def simulator_mounts(name: str, x_m: float, y_m: float, height_m: float, yaw_rad: float = 0.0):
     """The VLP-16's beams for `scenarios.sensors.lidar.LidarSimulator`: one single-channel
-    mount a laser, on the 0.2 deg firing grid shifted by the laser's firing offset (a level
-    unit: its spin axis vertical)."""
+    mount a laser at its elevation, 1800 columns a turn (a level unit: spin axis vertical).
+    The simulator casts every beam on its column grid, so a laser's firing offset (up to
+    0.125 deg) is not rendered: `sweep_grid` puts each point in the firing nearest it."""
     from scenarios.sensors.lidar import LidarMount
 
-    offsets = np.radians(laser_azimuth_offsets_deg())
     return tuple(
-        LidarMount(f"{name}/{i}", x_m, y_m, height_m, 1, yaw_rad=yaw_rad + float(offsets[i]),
+        LidarMount(f"{name}/{i}", x_m, y_m, height_m, 1, yaw_rad=yaw_rad,
                    elevation_min_rad=math.radians(el), elevation_max_rad=math.radians(el),
                    columns=SEQUENCES, min_range_m=0.5, max_range_m=100.0)
         for i, el in enumerate(VLP16_ELEVATIONS_DEG))
