@@ -78,8 +78,8 @@ class MergedLidar:
         if live:
             self.last_scan_s = max(tr.scan.stamp_s for tr in live)
             self._all_silent_since = None
-        elif self._all_silent_since is None:
-            self._all_silent_since = t - self.silent_after_s
+        elif self._all_silent_since is None:  # since the newest sweep of any sensor
+            self._all_silent_since = max(tr.last_new_s or 0.0 for tr in self.tracks)
         if not clouds:
             return None
         return np.concatenate(clouds) if len(clouds) > 1 else clouds[0]
@@ -87,7 +87,7 @@ class MergedLidar:
     def _health(self, tr: _Track, t: float) -> None:
         quiet = t - (tr.last_new_s if tr.last_new_s is not None else 0.0)
         label = f"lidar {tr.sensor.name!r} ({tr.sensor.spec})"
-        if not tr.silent and quiet > self.silent_after_s and (tr.scan is not None or t > self.silent_after_s):
+        if not tr.silent and quiet > self.silent_after_s + 1e-9 and (tr.scan is not None or t > self.silent_after_s):
             tr.silent = True
             others = len([x for x in self.tracks if not x.silent])
             self.notices.append((f"{label} silent for {quiet:.1f} s: left out of the merge"
@@ -105,7 +105,7 @@ class MergedLidar:
     def lost(self, time_s: float) -> str | None:
         """The failsafe's reason when every sensor has been silent `lost_after_s`, else None."""
         since = self._all_silent_since
-        if since is None or float(time_s) - since < self.lost_after_s:
+        if since is None or float(time_s) - since < self.lost_after_s - 1e-9:
             return None
         return (f"perception lost: no LiDAR sweep for {float(time_s) - since:.1f} s "
                 f"({', '.join(tr.sensor.name for tr in self.tracks)} silent)")
