@@ -31,7 +31,7 @@ from controller.errors import InputError
 
 KINDS = ("sim", "replay", "velodyne", "velodyne-pcap", "ouster", "ouster-pcap", "rosbag")
 ROLES = ("front", "port", "starboard", "rear", "side", "all-round")
-SENSOR_KEYS = {"name", "source", "role", "mount", "model", "metadata", "topic", "clock",
+SENSOR_KEYS = {"name", "source", "role", "mount", "model", "metadata", "meta", "topic", "clock",
                "lidar_port", "host"}
 MOUNT_KEYS = {"x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg"}
 TOP_KEYS = {"sensor", "silent_after_s", "lost_after_s", "deskew"}
@@ -48,7 +48,7 @@ class SensorConfig:
     mount: tuple = (0.0,) * 6
     role: str = "front"
     model: str | None = None  # Velodyne model (velodyne-decoder's names: VLP-16, HDL-32E, ...)
-    metadata: str | None = None  # Ouster sensor metadata JSON (ouster-pcap)
+    metadata: str | None = None  # Ouster sensor metadata JSON (key `meta` or `metadata`)
     topic: str | None = None  # rosbag: the PointCloud2 topic (default: the only one)
     clock: str = "host"  # velodyne-pcap: "host" (capture times) or "sensor" (packet stamps)
     lidar_port: int | None = None  # ouster: UDP port for lidar data
@@ -168,6 +168,9 @@ def _sensor(row: dict, prefix: str, source: str, base: Path | None) -> SensorCon
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
             raise err(f"mount.{key}", f"expected a number, got {v!r}")
         values.append(float(v) if key.endswith("_m") else math.radians(float(v)))
+    if "meta" in row and "metadata" in row:
+        raise err("meta", "give the Ouster metadata JSON once ('meta' or 'metadata')")
+    row = {("metadata" if k == "meta" else k): v for k, v in row.items()}
     strings = {}
     for key in ("model", "metadata", "topic", "host", "clock"):
         v = row.get(key)
