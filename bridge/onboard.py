@@ -438,6 +438,17 @@ class OnboardLoop:
         lost = getattr(self.lidar, "lost", None)
         return lost(t) if lost is not None else None
 
+    def _lidar_lost(self) -> str | None:
+        """While waiting to resume: read the LiDAR (at the newest state, if any) and say
+        what it says; the failsafe's reason while every sensor is still silent."""
+        if getattr(self.lidar, "lost", None) is None:
+            return None
+        t = self.clock.now() - self._t0
+        state = self.link.state
+        pose = state.vector if state is not None else np.zeros(6)
+        self.lidar.scan(t, pose)
+        return self._lidar_health(t)
+
     def _tell_waiting(self, t: float, waiting: str) -> None:
         """When the NMPC starts or stops holding the boat short of a blocked way (or blind),
         say so once: the log, the console and the ground station (STATUSTEXT)."""
@@ -472,7 +483,9 @@ class OnboardLoop:
         Returns a result if the run must end instead (time limit, refusal)."""
         from bridge.link import LinkError
 
-        self._say("bridge: waiting for the link and the EKF state to come back (--resume)")
+        blind = self._lidar_lost() is not None
+        self._say("bridge: waiting for the link and the EKF state" + (" and a LiDAR sweep"
+                  if blind else "") + " to come back (--resume)")
         while True:
             remaining = math.inf
             if self.options.duration_s is not None:
@@ -480,6 +493,9 @@ class OnboardLoop:
                 if remaining <= 0:
                     return self._result(EXIT_STOPPED, "time limit (waiting to resume)")
             if not self.link.wait_until(lambda: self.link.alive, min(1.0, remaining)):
+                continue
+            if self._lidar_lost() is not None:  # perception lost: a sweep must come first
+                self.link.idle(min(self.options.control_period_s, remaining))
                 continue
             try:
                 options = self.options

@@ -94,7 +94,9 @@ class PacketDecoder:
         if out is None:
             return None
         stamp, cloud = out
-        t = float(stamp.device) + self.unwrap.hours * HOUR_S
+        # the decoder puts the packets' time past the hour into the hour nearest the host
+        # time it was given; on the bridge's clock that is no hour at all: keep our own count
+        t = float(stamp.device) % HOUR_S + self.unwrap.hours * HOUR_S
         if self.unwrap.last is not None and t > self.last_device_s + HOUR_S / 2:
             t -= HOUR_S  # the sweep began before the hour turned
         cloud = np.asarray(cloud)

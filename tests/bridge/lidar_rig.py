@@ -46,3 +46,77 @@ def segment_gap_m(a, b, step_m: float = 0.5) -> float:
         gaps = [float(point_segment_distance(x, pb, qb).min()) for x in samples]
         worst = max(worst, float(np.mean(gaps)))
     return worst
+
+
+class VelodyneSender:
+    """A VLP-16 on loopback as a VirtualClock peer: each sweep's 75 packets go out at their
+    own times (sensor rate: a sweep every 99.5 ms), stamped on the sensor's clock, which
+    runs `device_offset_s` ahead of the run's. `render(t)` gives the (1800, 16) range grid of
+    the sweep that starts at clock time t (the whole sweep seen from the pose then); while
+    `unplugged(t)` is true nothing is sent; `garbage(t)` says how many random datagrams to
+    add to the sweep starting at t."""
+
+    def __init__(self, clock, port, render, device_offset_s=1234.5, unplugged=None,
+                 garbage=None, seed=0):
+        import socket
+        from collections import deque
+
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.port, self.render, self.offset = port, render, device_offset_s
+        self.unplugged = unplugged or (lambda t: False)
+        self.garbage = garbage or (lambda t: 0)
+        self.rng = np.random.default_rng(seed)
+        self.queue = deque()
+        self.next_sweep = None
+        self.sent = self.garbage_sent = self.sweeps = 0
+        clock.add_peer(self)
+
+    def __call__(self, now):
+        if self.next_sweep is None:
+            self.next_sweep = now
+        while now + 1e-9 >= self.next_sweep:
+            start, self.next_sweep = self.next_sweep, self.next_sweep + vp.SWEEP_S
+            if self.unplugged(start):
+                continue
+            self.sweeps += 1
+            for t, payload in vp.sweep_packets(self.render(start), (start + self.offset) * 1e6):
+                self.queue.append((t - self.offset, payload))
+            for _ in range(int(self.garbage(start))):
+                n = int(self.rng.choice([1206, 300]))
+                self.queue.append((start + 0.05, self.rng.integers(0, 256, n, np.uint8).tobytes()))
+            self.queue = type(self.queue)(sorted(self.queue, key=lambda q: q[0]))
+        while self.queue and self.queue[0][0] <= now + 1e-9:
+            _, payload = self.queue.popleft()
+            self.sock.sendto(payload, ("127.0.0.1", self.port))
+            self.sent += 1
+
+    def close(self):
+        self.sock.close()
+
+
+class PcapSender:
+    """A `.pcap`'s UDP payloads sent on loopback at their capture times (a clock peer, the
+    capture's first packet at the peer's first call)."""
+
+    def __init__(self, clock, path, port):
+        import socket
+
+        import dpkt
+
+        from bridge.lidar.velodyne import udp_payload
+
+        with open(path, "rb") as fh:
+            self.items = [(t, udp_payload(f)) for t, f in dpkt.pcap.Reader(fh)]
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.port, self.start, self.k = port, None, 0
+        clock.add_peer(self)
+
+    def __call__(self, now):
+        if self.start is None:
+            self.start = now - self.items[0][0]
+        while self.k < len(self.items) and self.items[self.k][0] + self.start <= now + 1e-9:
+            self.sock.sendto(self.items[self.k][1], ("127.0.0.1", self.port))
+            self.k += 1
+
+    def close(self):
+        self.sock.close()
