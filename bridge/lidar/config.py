@@ -170,12 +170,13 @@ def _sensor(row: dict, prefix: str, source: str, base: Path | None) -> SensorCon
         values.append(float(v) if key.endswith("_m") else math.radians(float(v)))
     if "meta" in row and "metadata" in row:
         raise err("meta", "give the Ouster metadata JSON once ('meta' or 'metadata')")
+    said = {"metadata": "meta" if "meta" in row else "metadata"}  # the name the file used
     row = {("metadata" if k == "meta" else k): v for k, v in row.items()}
     strings = {}
     for key in ("model", "metadata", "topic", "host", "clock"):
         v = row.get(key)
         if v is not None and not isinstance(v, str):
-            raise err(key, f"expected a string, got {v!r}")
+            raise err(said.get(key, key), f"expected a string, got {v!r}")
         strings[key] = v
     if strings["clock"] not in (None, "host", "sensor"):
         raise err("clock", f"{strings['clock']!r}: expected 'host' (the capture's times) or "

@@ -129,3 +129,24 @@ def test_the_paper_layout_file_and_config_errors(tmp_path):
         bad.write_text(text)
         with pytest.raises(InputError, match=match):
             load_lidar_config(bad)
+
+
+def test_a_scenario_lidar_table_is_checked_when_the_bridge_loads_it(tmp_path):
+    """The scenario loader keeps [lidar] as it is (scenarios cannot import the bridge); the
+    bridge checks it on start: a bad field is an error naming the file and the field."""
+    from bridge.lidar.sources import build_lidar
+    from scenarios.scenario_file import load_scenario
+
+    base = (ROOT / "scenarios" / "straight.toml").read_text()
+    for table, match in (
+            ('[[lidar.sensor]]\nname = "f"\nsource = "velodyne:2368"\nmount = { x = 1 }\n',
+             r"canal.toml: field 'lidar.sensor\[0\].mount.x': unknown field"),
+            ('[lidar]\nlost_after = 2\n[[lidar.sensor]]\nname = "f"\nsource = "sim"\n',
+             r"canal.toml: field 'lidar.lost_after': unknown field"),
+            ('[[lidar.sensor]]\nname = "f"\nsource = "ouster-pcap:x.pcap"\nmeta = 3\n',
+             r"canal.toml: field 'lidar.sensor\[0\].meta': expected a string")):
+        path = tmp_path / "canal.toml"
+        path.write_text(base + "\n" + table)
+        scenario = load_scenario(path)  # loads: the table is the bridge's to check
+        with pytest.raises(InputError, match=match):
+            build_lidar(["sim"], None, scenario)
