@@ -27,8 +27,8 @@ from bridge.onboard import EXIT_GOAL, EXIT_STOPPED, BridgeOptions, OnboardLoop  
 from bridge.step_log import StepLog  # noqa: E402
 from scenarios.scenario_file import load_scenario, parse_scenario  # noqa: E402
 
-from .lidar_rig import (BOW_MOUNT, ROOT, PcapSender, VelodyneSender, simulator,  # noqa: E402
-                        sweep_ros)
+from .lidar_rig import (BOW_MOUNT, ROOT, PcapSender, VelodyneSender,  # noqa: E402
+                        moving_sweep_grid, simulator, sweep_ros)
 
 ORIGIN = (52.0, 4.0, 0.0)
 
@@ -141,7 +141,7 @@ def test_the_bridge_drives_the_short_bend_on_live_velodyne_packets(short_bend, t
     sim = simulator(short_bend)
 
     def senders(clock, ap, ports):
-        render = lambda t: vp.sweep_grid(sweep_ros(sim, ap.true_state[:3]))  # noqa: E731
+        render = lambda t: moving_sweep_grid(sim, ap.true_state)  # noqa: E731
         return [VelodyneSender(clock, ports[0], render)]
 
     result, rows, console, loop, ap = drive(short_bend, tmp_path, ["velodyne:{port}"], senders,
