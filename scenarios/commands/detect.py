@@ -130,7 +130,8 @@ def draw(path, world, sim, pose, scan, keep, segments, config, title="", hull=No
     ring = np.linspace(0, 2 * np.pi, 200)
     ax_map.plot(y + 50 * np.sin(ring), x + 50 * np.cos(ring), "k:", lw=0.8, label="50 m")
     ax_map.set(xlim=(y - view, y + view), ylim=(x - view, x + view), aspect="equal",
-               xlabel="east (m)", ylabel="north (m)",
+               xlabel="east (m)" if world is not None else "y, starboard (m)",
+               ylabel="north (m)" if world is not None else "x, forward (m)",
                title=f"(d) {len(segments)} segments" + (" over the true walls" if world
                                                          is not None else ""))
     ax_map.legend(loc="lower right", fontsize=8)

