@@ -44,7 +44,8 @@ class BridgeOptions:
 
     connect: str = ""
     scenario: str | Path | None = None
-    lidar: str = "sim"
+    lidar: str | tuple = "sim"  # one source, or several (merged; see bridge.lidar)
+    lidar_config: str | Path | None = None  # --lidar-config FILE (else the scenario's [lidar])
     arm: bool = False
     mode: str | None = None
     signing_key: str | Path | None = None
@@ -399,6 +400,9 @@ class OnboardLoop:
         age, delay = link.state_age_s, link.link_delay_s
         pred = predict_vector(state.vector, age + delay)
         cloud = self.lidar.scan(t, pred)
+        lost = self._lidar_health(t)
+        if lost is not None:
+            return lost
         view = self.perception.update(t, cloud, pred)
         segs = view.segments
         t0 = time.perf_counter()
@@ -425,6 +429,28 @@ class OnboardLoop:
         self.steps += 1
         self._show(step)
         return None
+
+    def _lidar_health(self, t: float) -> str | None:
+        """What a merged LiDAR source has to say (a sensor silent or back, malformed packets
+        skipped) to the log, console and ground station; its failsafe reason, if any."""
+        hb = self.link.heartbeat
+        for text, severity in getattr(self.lidar, "pop_notices", list)():
+            self.log.event(t, text, hb.mode if hb else "", hb.armed if hb else None)
+            self.link.statustext(f"canalnav: {text}"[:200], severity)
+            self._say(f"bridge: {text}")
+        lost = getattr(self.lidar, "lost", None)
+        return lost(t) if lost is not None else None
+
+    def _lidar_lost(self) -> str | None:
+        """While waiting to resume: read the LiDAR (at the newest state, if any) and say
+        what it says; the failsafe's reason while every sensor is still silent."""
+        if getattr(self.lidar, "lost", None) is None:
+            return None
+        t = self.clock.now() - self._t0
+        state = self.link.state
+        pose = state.vector if state is not None else np.zeros(6)
+        self.lidar.scan(t, pose)
+        return self._lidar_health(t)
 
     def _tell_waiting(self, t: float, waiting: str) -> None:
         """When the NMPC starts or stops holding the boat short of a blocked way (or blind),
@@ -460,7 +486,9 @@ class OnboardLoop:
         Returns a result if the run must end instead (time limit, refusal)."""
         from bridge.link import LinkError
 
-        self._say("bridge: waiting for the link and the EKF state to come back (--resume)")
+        blind = self._lidar_lost() is not None
+        self._say("bridge: waiting for the link and the EKF state" + (" and a LiDAR sweep"
+                  if blind else "") + " to come back (--resume)")
         while True:
             remaining = math.inf
             if self.options.duration_s is not None:
@@ -468,6 +496,9 @@ class OnboardLoop:
                 if remaining <= 0:
                     return self._result(EXIT_STOPPED, "time limit (waiting to resume)")
             if not self.link.wait_until(lambda: self.link.alive, min(1.0, remaining)):
+                continue
+            if self._lidar_lost() is not None:  # perception lost: a sweep must come first
+                self.link.idle(min(self.options.control_period_s, remaining))
                 continue
             try:
                 options = self.options
@@ -541,7 +572,7 @@ def run_bridge(options: BridgeOptions, console=sys.stderr) -> BridgeResult:
     prepare, run; the link and logs are closed whatever happens."""
     from bridge.ardupilot import MODES
     from bridge.clock import RealClock
-    from bridge.lidar_source import make_lidar_source
+    from bridge.lidar import build_lidar
     from bridge.link import AutopilotLink
     from scenarios.loop.controllers import NmpcController
     from scenarios.scenario_file import load_scenario
@@ -565,7 +596,7 @@ def run_bridge(options: BridgeOptions, console=sys.stderr) -> BridgeResult:
         from bridge.signing import load_signing_key
 
         key = load_signing_key(options.signing_key)
-    lidar = make_lidar_source(options.lidar, scenario, options.seed)
+    lidar = build_lidar(options.lidar, options.lidar_config, scenario, options.seed)
     log_dir = None if options.log_dir is None else Path(options.log_dir)
     if log_dir is not None:
         log_dir.mkdir(parents=True, exist_ok=True)
@@ -590,3 +621,4 @@ def run_bridge(options: BridgeOptions, console=sys.stderr) -> BridgeResult:
         elif viz is not None:
             viz.close()
         link.close()
+        getattr(lidar, "close", lambda: None)()

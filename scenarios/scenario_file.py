@@ -84,6 +84,7 @@ class Scenario:
     lidar_outages_s: tuple = ()  # (start, end) spans with no scan (a sensor fault, for tests)
     max_scan_age_s: float = 1.0  # the last segments stand in this long, then "blind"
     current_profile: tuple | None = None  # ((s_m, north, east), ...) along the centre line
+    lidar_table: dict | None = None  # [lidar]: the bridge's sensors (read by bridge.lidar.config)
 
     @property
     def current_field(self):
@@ -676,6 +677,7 @@ def scenario_from_table(data: dict, source: str = "<string>", path: Path | None 
                                                      low=0, high=1),
     )
     crit.done()
+    lidar_table = doc.raw("lidar") if doc.has("lidar") else None
     doc.done()
 
     return Scenario(
@@ -687,7 +689,7 @@ def scenario_from_table(data: dict, source: str = "<string>", path: Path | None 
         controller_options=options, criteria=criteria, default_test=default_test,
         snapshot_times_s=snaps, geodetic_origin=origin, replay_mount=replay_mount,
         gps=gps, ahrs=ahrs, lidar_noise=lidar_noise, lidar_outages_s=outages,
-        max_scan_age_s=max_scan_age, current_profile=profile,
+        max_scan_age_s=max_scan_age, current_profile=profile, lidar_table=lidar_table,
     )
 
 

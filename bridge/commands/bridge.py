@@ -22,9 +22,18 @@ def register(sub) -> None:
                    "tcp:HOST:PORT, or a serial device with baud, /dev/ttyACM0,115200")
     p.add_argument("--scenario", required=True, metavar="FILE",
                    help="scenario file: waypoints, target speed, d_p, controller options, origin")
-    p.add_argument("--lidar", default="sim", metavar="SOURCE",
-                   help="sim (the scenario's canal seen at the reported pose; default) or "
-                   "replay:DIR (one .npy/.bin scan per file, named by its timestamp in ns)")
+    p.add_argument("--lidar", action="append", metavar="SOURCE",
+                   help="sim (the scenario's canal seen at the reported pose; default), "
+                   "replay:DIR (one .npy/.bin scan per file, named by its timestamp in ns), "
+                   "velodyne:PORT (live UDP), velodyne-pcap:FILE, ouster:HOST, "
+                   "ouster-pcap:FILE (metadata in the config), rosbag:PATH (ROS 2 .mcap/.db3 "
+                   "or ROS 1 .bag, PointCloud2); repeat for several sensors (merged). With "
+                   "--lidar-config or a scenario [lidar] table, one for each configured "
+                   "sensor, in order, replaces its source")
+    p.add_argument("--lidar-config", metavar="FILE",
+                   help="LiDAR configuration (TOML): each sensor's name, source, mount and "
+                   "role, silence and loss times (see bridge/lidar/lidar_paper_layout.toml); "
+                   "default: the scenario's [lidar] table, if any")
     p.add_argument("--origin", metavar="LAT,LON[,ALT]",
                    help="where the scenario's (0, 0) is on the Earth (degrees, metres; write "
                    "--origin=-35.36,149.17 when the latitude is negative); default: the "
@@ -86,7 +95,8 @@ def run(args) -> int:
         require_viz()
 
     options = BridgeOptions(
-        connect=args.connect, scenario=args.scenario, lidar=args.lidar, arm=args.arm,
+        connect=args.connect, scenario=args.scenario, lidar=tuple(args.lidar or ("sim",)),
+        lidar_config=args.lidar_config, arm=args.arm,
         mode=args.mode, signing_key=args.signing_key, duration_s=args.duration,
         resume=args.resume, log_dir=args.log, system_id=args.system_id,
         component_id=args.component_id, target_system=args.target_system,

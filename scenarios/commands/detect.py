@@ -19,7 +19,8 @@ def register(sub) -> None:
                    help="scenario file (TOML) whose canal to use; 'demo' or none: the "
                    "built-in demo canal")
     p.add_argument("--at", type=float, required=True, metavar="S",
-                   help="distance along the canal's centre line, metres")
+                   help="distance along the canal's centre line, metres (with --lidar: "
+                   "seconds from the recording's first sweep)")
     p.add_argument("--offset", type=float, default=0.0,
                    help="offset from the centre line, metres, starboard positive (0)")
     p.add_argument("--speed", type=float, default=2.0,
@@ -56,8 +57,10 @@ def run(args) -> int:
     return 0
 
 
-def draw(path, world, sim, pose, scan, keep, segments, config, title="") -> None:
-    """Write the four-panel figure (Agg backend, no display needed)."""
+def draw(path, world, sim, pose, scan, keep, segments, config, title="", hull=None) -> None:
+    """Write the four-panel figure (Agg backend, no display needed). `world` None (a
+    recorded cloud: no truth known) leaves the true walls out of (d); `hull` is the
+    boat's (default: the simulator's)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -75,7 +78,10 @@ def draw(path, world, sim, pose, scan, keep, segments, config, title="") -> None
     ax_crop = fig.add_subplot(grid[1, 1])
     ax_map = fig.add_subplot(grid[:, 2])
     view = 60.0
-    hull = sim.config.hull
+    if hull is None:
+        from ..sensors.lidar import HullShape
+
+        hull = sim.config.hull if sim is not None else HullShape()
 
     def boat_outline(ax):
         x0, x1, y0, y1 = hull.boxes[0][:4]
@@ -109,7 +115,7 @@ def draw(path, world, sim, pose, scan, keep, segments, config, title="") -> None
                 title=f"(c) cropped: {len(kept)} points\n(dashed: hull and wake dropped)")
 
     x, y, psi = pose
-    for k, line in enumerate(world.surfaces()):
+    for k, line in enumerate(world.surfaces() if world is not None else ()):
         ax_map.plot(line[:, 1], line[:, 0], "-", color="0.6", lw=3.0,
                     label="true walls and obstacles" if k == 0 else None)
     a, b = segments_to_endpoints(segments)
@@ -124,8 +130,10 @@ def draw(path, world, sim, pose, scan, keep, segments, config, title="") -> None
     ring = np.linspace(0, 2 * np.pi, 200)
     ax_map.plot(y + 50 * np.sin(ring), x + 50 * np.cos(ring), "k:", lw=0.8, label="50 m")
     ax_map.set(xlim=(y - view, y + view), ylim=(x - view, x + view), aspect="equal",
-               xlabel="east (m)", ylabel="north (m)",
-               title=f"(d) {len(segments)} segments over the true walls")
+               xlabel="east (m)" if world is not None else "y, starboard (m)",
+               ylabel="north (m)" if world is not None else "x, forward (m)",
+               title=f"(d) {len(segments)} segments" + (" over the true walls" if world
+                                                         is not None else ""))
     ax_map.legend(loc="lower right", fontsize=8)
     if title:
         fig.suptitle(title)

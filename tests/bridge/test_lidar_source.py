@@ -29,7 +29,7 @@ def test_parse_lidar_option():
     assert parse_lidar_option("sim") == ("sim", None)
     assert parse_lidar_option("replay:/data/scans") == ("replay", Path("/data/scans"))
     for bad in ("replay:", "live", "Sim"):
-        with pytest.raises(InputError, match="expected 'sim' or 'replay:DIR'"):
+        with pytest.raises(InputError, match="expected 'sim', 'replay:DIR', 'velodyne:PORT'"):
             parse_lidar_option(bad)
 
 

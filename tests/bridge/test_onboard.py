@@ -360,7 +360,7 @@ def test_cli_bad_input_is_one_clear_line(capsys, tmp_path):
                         str(tmp_path / "none.key")]) == 2
     assert "no such signing key file" in capsys.readouterr().err
     assert main(base + ["--connect", "udpout:127.0.0.1:9", "--lidar", "camera"]) == 2
-    assert "expected 'sim' or 'replay:DIR'" in capsys.readouterr().err
+    assert "expected 'sim', 'replay:DIR', 'velodyne:PORT'" in capsys.readouterr().err
     assert main(base + ["--connect", "udpout:127.0.0.1:9", "--mode", "FLY"]) == 2
     assert "--mode FLY: not a Rover mode" in capsys.readouterr().err
     assert main(base + ["--connect", "udpout:127.0.0.1:9", "--duration", "-1"]) == 2
