@@ -12,7 +12,8 @@ def test_bench_nmpc_prints_times_ratios_and_the_goal(capsys):
     rti, sqp = out["solvers"]["rti"], out["solvers"]["sqp"]
     assert rti["steps"] == sqp["steps"] == 30
     assert 0 < rti["mean_ms"] <= rti["p99_ms"] <= rti["max_ms"]
-    assert set(rti["breakdown_mean_ms"]) == {"linearisation", "qp", "glue"}
+    assert set(rti["breakdown_mean_ms"]) == {"linearisation", "qp", "glue", "feedback_glue",
+                                             "preparation"}
     assert rti["sqp_iterations_mean"] == 1.0 and sqp["converged_steps"] == 30
     assert rti["failed_steps"] == 0 and rti["clipped_steps"] == 0
     assert out["ratios_mean_over_rti"]["sqp"] > 0
