@@ -13,7 +13,6 @@ counted in `malformed` and skipped.
 
 from __future__ import annotations
 
-import socket
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +20,7 @@ import numpy as np
 from controller.errors import InputError
 
 from .recorded import RecordedSensor
-from .scan import SensorScan, finite_rows, require
+from .scan import SensorScan, finite_rows, require, udp_listener
 from .velodyne import DeviceClock
 
 
@@ -149,15 +148,7 @@ class OusterUdpSensor:
         port = lidar_port or info.config.udp_port_lidar or 7502
         self._decoder = FrameDecoder(info)
         self.clock = DeviceClock()
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
-            self.sock.bind((listen, int(port)))
-        except OSError as exc:
-            self.sock.close()
-            raise InputError(f"{self.spec}: cannot listen on UDP {listen}:{port} ({exc})") from None
-        self.sock.setblocking(False)
+        self.sock = udp_listener(self.spec, listen, port)
         self.port = self.sock.getsockname()[1]
 
     @property

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+import socket
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,3 +41,18 @@ def finite_rows(points: np.ndarray, times: np.ndarray | None = None):
     pts = np.asarray(points, float).reshape(-1, 3)
     keep = np.isfinite(pts).all(axis=1) & (np.abs(pts).sum(axis=1) > 0)
     return pts[keep], (None if times is None else np.asarray(times, float)[keep])
+
+
+def udp_listener(spec: str, host: str, port: int) -> socket.socket:
+    """A non-blocking UDP socket bound to (host, port) with a large receive buffer, for a
+    live sensor's packets; a port that cannot be had is an InputError naming the source."""
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
+        sock.bind((host, int(port)))
+    except OSError as exc:
+        sock.close()
+        raise InputError(f"{spec}: cannot listen on UDP {host}:{port} ({exc})") from None
+    sock.setblocking(False)
+    return sock

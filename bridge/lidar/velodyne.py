@@ -11,7 +11,6 @@ roll 180 deg for a unit standing upright).
 from __future__ import annotations
 
 import math
-import socket
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +18,7 @@ import numpy as np
 from controller.errors import InputError
 
 from .recorded import RecordedSensor
-from .scan import SensorScan, finite_rows, require
+from .scan import SensorScan, finite_rows, require, udp_listener
 
 PACKET_BYTES = 1206
 POSITION_BYTES = 512
@@ -184,15 +183,7 @@ class VelodyneUdpSensor:
         self.name, self.spec = name, f"velodyne:{port}"
         self._decoder = PacketDecoder(model, self.spec)
         self.clock = DeviceClock()
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
-            self.sock.bind((host, int(port)))
-        except OSError as exc:
-            self.sock.close()
-            raise InputError(f"{self.spec}: cannot listen on UDP {host}:{port} ({exc})") from None
-        self.sock.setblocking(False)
+        self.sock = udp_listener(self.spec, host, port)
         self.port = self.sock.getsockname()[1]
 
     @property
