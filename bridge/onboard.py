@@ -455,7 +455,9 @@ class OnboardLoop:
     def _tell_waiting(self, t: float, waiting: str) -> None:
         """When the NMPC starts or stops holding the boat short of a blocked way (or blind),
         say so once: the log, the console and the ground station (STATUSTEXT)."""
-        why = waiting.split(" at ")[0].split(":")[0]
+        from controller.nmpc.passage import waiting_kind
+
+        why = waiting_kind(waiting)
         if why == self._waiting:
             return
         self._waiting = why

@@ -43,6 +43,12 @@ class Stop:
     blocked_at_m: float | None = None  # arc length of the obstruction, if blocked
 
 
+def waiting_kind(reason: str) -> str:
+    """What a `Stop.reason` is about, without its distance: "way blocked", "blind" or ""
+    (so a hold is announced once, not again each time the distance changes)."""
+    return reason.split(" at ")[0].split(":")[0]
+
+
 def blocked_at(path: WaypointPath, progress_m: float, offset_m: float, segments,
                min_passage_m: float, lookahead_m: float, lateral_m: float = 30.0,
                slab_m: float = 1.0, spacing_m: float = 0.5) -> float | None:

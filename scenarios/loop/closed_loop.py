@@ -24,6 +24,7 @@ import numpy as np
 
 from controller.geometry import Polyline
 from controller.navigation import NavigationFilter
+from controller.nmpc.passage import waiting_kind
 from controller.perception.feed import FeedConfig, SegmentFeed
 from scenarios.results import metrics
 from scenarios.results.encounters import EncounterWatch, TrackingWatch
@@ -225,7 +226,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
             water = decision.stats.get("water")
             if water is not None:
                 rows_water.append((t, *true_current, *water.current_ne, out.state[3]))
-            why = waiting.split(" at ")[0].split(":")[0]  # "way blocked", "blind", ""
+            why = waiting_kind(waiting)  # "way blocked", "blind", ""
             if events is not None and why != waiting_before:
                 events(t, f"waiting: {waiting}" if waiting else "the way is clear: going on")
             waiting_before = why
