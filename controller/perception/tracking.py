@@ -42,7 +42,7 @@ import numpy as np
 from ..errors import InputError
 from ..geometry import wrap_angle
 from .clusters import Clusters, find_clusters, free_space, remember_walls
-from .detection import DEFAULT, DetectionConfig, crop_mask
+from .detection import DEFAULT, DetectionConfig, crop_xy
 
 
 @dataclass(frozen=True)
@@ -339,6 +339,9 @@ class VesselTracker:
         self._time_s: float | None = None
         self.counts = dict.fromkeys(STATUSES, 0)  # over the run
         self._walls = np.zeros((0, 5))  # wall lines seen lately (clusters.remember_walls)
+        # Imported now, not on the first scan with a cluster: a perception worker builds
+        # its tracker while the loop sets up, instead of stalling a scan in the run.
+        from scipy.optimize import linear_sum_assignment  # noqa: F401
 
     @property
     def tracks(self) -> tuple:
@@ -375,10 +378,10 @@ class VesselTracker:
         # The crop with a taller band: all of it can hide things (free_space), the
         # detection band of it is what the clusters are made of. (Columns one by one:
         # fast for the column-major clouds LiDAR drivers and the simulator deliver.)
-        idx = np.flatnonzero(crop_mask(cloud, self._occluder_crop))
+        idx, x, y = crop_xy(cloud, self._occluder_crop)
         occluders = np.empty((len(idx), 2), cloud.dtype)
-        occluders[:, 0] = cloud[:, 0].take(idx)
-        occluders[:, 1] = cloud[:, 1].take(idx)
+        occluders[:, 0] = x
+        occluders[:, 1] = y
         z = cloud[:, 2].take(idx)
         band = (z <= -cfg.detection.min_height_m) & (z >= -cfg.detection.max_height_m)
         xy = occluders[band].astype(float)

@@ -139,9 +139,11 @@ def run_scenario(scenario: Scenario, out_dir: Path, controller: str | None = Non
         from dataclasses import replace
 
         scenario = replace(scenario, seed=seed)
-    ctrl = make_controller(scenario, controller)
+    # The perception first: a worker process then starts (imports, tables) while this one
+    # builds the controller and the plant, instead of stalling the loop's first scan.
     perception = make_perception(scenario, parallel_perception)
     try:
+        ctrl = make_controller(scenario, controller)
         the_plant = PLANTS[plant](scenario, out_dir)
     except BaseException:
         _close(perception)

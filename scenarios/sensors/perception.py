@@ -80,6 +80,8 @@ class LidarPerception:
 
     def __init__(self, world: CanalWorld, seed: int = 0, config=None, detection=None,
                  tracking=None):
+        import cv2  # noqa: F401 (detection's; imported here, when a worker starts)
+
         from controller.perception.detection import DEFAULT
         from scenarios.sensors.lidar import LidarSimulator
 
