@@ -339,8 +339,11 @@ class VesselTracker:
         self._time_s: float | None = None
         self.counts = dict.fromkeys(STATUSES, 0)  # over the run
         self._walls = np.zeros((0, 5))  # wall lines seen lately (clusters.remember_walls)
-        # Imported now, not on the first scan with a cluster: a perception worker builds
-        # its tracker while the loop sets up, instead of stalling a scan in the run.
+        # Imported now, not on the first scan with a cluster or the first birth (filterpy's
+        # import takes a second or two): a perception worker builds its tracker while the
+        # loop sets up, instead of stalling a scan in the run.
+        from filterpy.common import Q_discrete_white_noise  # noqa: F401
+        from filterpy.kalman import KalmanFilter  # noqa: F401
         from scipy.optimize import linear_sum_assignment  # noqa: F401
 
     @property
