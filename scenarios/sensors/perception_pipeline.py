@@ -5,7 +5,10 @@ loop: at t_k the NMPC uses the segments of the scan taken at t_(k-1) (the first 
 its own). Modelling that latency also frees the scan for step k + 1 from waiting for the
 controller and the plant of step k, so a worker process on another core renders and detects it
 meanwhile. Serial and parallel runs make the same scans, in the same order, from the same
-seed, so they give the same segments bit for bit; only the wall time differs.
+seed, so they give the same segments bit for bit; only the wall time differs. With
+`perceive`, the vessel tracker runs in the loop's process on the returns it reads (a fraction
+of the cloud, sent back with the segments): the scan and detection alone are still the larger
+share of a period, and the tracks are the same wherever it runs.
 
 The worker is `python -m scenarios.sensors.perception_pipeline`, spoken to over its stdin and stdout
 with pickled messages: no fork of a process that holds CasADi, fmpy and OpenCV state, and no
@@ -44,7 +47,18 @@ class DelayedLidarPerception:
         self.time_s = {"lidar_scan": 0.0, "detection": 0.0, "tracking": 0.0}
         self._ready = None  # serial: (result, points, timing) of the last request
         self._requested = None  # the method asked for last ("segments" or "perceive")
-        args = (world, seed, config, detection, tracking)
+        self._pending = None  # (time, estimated state) of the scan asked for last
+        # The tracker runs here, on the returns of the scan the worker (or `_inner`) sends:
+        # the two processes' shares of a period are then closer (the worker's, the scan and
+        # detection, is still the larger), and the tracks are the same either way.
+        self._tracking = None
+        if tracking is not False:
+            from controller.perception.detection import DEFAULT
+            from controller.perception.tracking import TrackerConfig
+            from scenarios.sensors.perception import TrackingHalf
+
+            self._tracking = TrackingHalf(tracking or TrackerConfig(detection=detection or DEFAULT))
+        args = (world, seed, config, detection, tracking, False)
         if self.parallel:
             self._worker = _Worker(args)
             self._inner = None
@@ -68,8 +82,16 @@ class DelayedLidarPerception:
         elif self._requested != method:
             raise RuntimeError(f"DelayedLidarPerception: {method}() after "
                                f"{self._requested}() (use one of the two per run)")
-        found = self._collect()
+        found, scanned = self._collect(), self._pending
         self._request(request)
+        if method == "perceive":  # the scan's returns and segments: track them here
+            cropped, segs = found
+            if self._tracking is None:
+                from controller.perception.feed import Percept
+
+                return None if segs is None else Percept(segs)
+            found = self._tracking.track(*scanned, cropped, segs)
+            self.time_s["tracking"] = self._tracking.time_s
         return found
 
     def close(self) -> None:
@@ -84,6 +106,9 @@ class DelayedLidarPerception:
 
     def _request(self, request) -> None:
         self._requested = request[0]
+        self._pending = (request[1], request[3])
+        if request[0] == "perceive":
+            request = ("scan_for_tracking", *request[1:])
         if self._worker is not None:
             self._worker.send(request)
             return
@@ -186,7 +211,7 @@ def _serve(inp, out) -> int:
         else:
             try:
                 method, *inputs = request
-                if method not in ("segments", "perceive"):
+                if method not in ("segments", "perceive", "scan_for_tracking"):
                     raise ValueError(f"perception worker: no method {method!r}")
                 found = getattr(perception, method)(*inputs)
                 reply = ("ok", found, perception.points_per_scan[-1], dict(perception.time_s))
