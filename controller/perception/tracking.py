@@ -381,12 +381,16 @@ class VesselTracker:
             return self._output(t, segs, 0, status)
         # The crop with a taller band: all of it can hide things (free_space), the
         # detection band of it is what the clusters are made of. (Columns one by one:
-        # fast for the column-major clouds LiDAR drivers and the simulator deliver.)
-        idx, x, y = crop_xy(cloud, self._occluder_crop)
-        occluders = np.empty((len(idx), 2), cloud.dtype)
+        # fast for the column-major clouds LiDAR drivers and the simulator deliver.) A
+        # cropped cloud is that crop already (cropping it again keeps every point).
+        if cropped:
+            x, y, z = cloud[:, 0], cloud[:, 1], cloud[:, 2]
+        else:
+            idx, x, y = crop_xy(cloud, self._occluder_crop)
+            z = cloud[:, 2].take(idx)
+        occluders = np.empty((len(x), 2), cloud.dtype)
         occluders[:, 0] = x
         occluders[:, 1] = y
-        z = cloud[:, 2].take(idx)
         band = (z <= -cfg.detection.min_height_m) & (z >= -cfg.detection.max_height_m)
         xy = occluders[band].astype(float)
         found = find_clusters(xy, p, segs, cfg, self._walls, occluders)
