@@ -140,6 +140,8 @@ class _Worker:
             raise PerceptionWorkerError(f"perception worker: could not start "
                                         f"{sys.executable}: {exc}") from None
         self._finalizer = weakref.finalize(self, _stop, self._proc)
+        for pipe in (self._proc.stdin, self._proc.stdout):
+            _widen(pipe)
         self.send(args)
 
     def send(self, message) -> None:
@@ -172,6 +174,28 @@ class _Worker:
         return PerceptionWorkerError(
             f"perception worker (pid {self._proc.pid}) stopped answering "
             f"(exit code {code}); its error, if any, is on stderr above")
+
+
+def _widen(pipe, size: int = 1 << 20) -> None:
+    """Let a pipe hold a whole reply (a scan's segments and the tracker's returns, a few
+    hundred kB): the worker then writes it at once and goes on, instead of waiting in 64 kB
+    pieces for the loop to read. Linux only, and only as far as the system allows."""
+    try:
+        import fcntl
+    except ImportError:  # (not on Windows)
+        return
+    setsize = getattr(fcntl, "F_SETPIPE_SZ", None)
+    if setsize is None:
+        return
+    try:
+        with open("/proc/sys/fs/pipe-max-size") as f:
+            size = min(size, int(f.read()))
+    except (OSError, ValueError):
+        pass
+    try:
+        fcntl.fcntl(pipe.fileno(), setsize, size)
+    except OSError:
+        pass
 
 
 def _stop(proc: subprocess.Popen) -> None:
