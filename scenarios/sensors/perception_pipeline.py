@@ -235,7 +235,7 @@ def _serve(inp, out) -> int:
         else:
             try:
                 method, *inputs = request
-                if method not in ("segments", "perceive", "scan_for_tracking"):
+                if method not in ("segments", "scan_for_tracking"):  # (tracking: the caller's)
                     raise ValueError(f"perception worker: no method {method!r}")
                 found = getattr(perception, method)(*inputs)
                 reply = ("ok", found, perception.points_per_scan[-1], dict(perception.time_s))
