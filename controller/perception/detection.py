@@ -117,6 +117,12 @@ def _crop_index(p: np.ndarray, config: DetectionConfig) -> np.ndarray:
     return _crop(p, config)[0]
 
 
+def crop_xy(points, config: DetectionConfig = DEFAULT):
+    """The points of a clean (N, 3) body-frame cloud that `crop_mask` keeps: their indices
+    (ascending) and x and y (the cloud's dtype), without a mask over the whole cloud."""
+    return _crop(np.asarray(points), config)
+
+
 def _crop(p: np.ndarray, config: DetectionConfig):
     """Indices of the points `crop_mask` keeps, and their x and y. The height band (a few
     percent of a scan: the wall faces) is tested first on the whole cloud, the rest on what

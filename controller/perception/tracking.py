@@ -42,7 +42,7 @@ import numpy as np
 from ..errors import InputError
 from ..geometry import wrap_angle
 from .clusters import Clusters, find_clusters, free_space, remember_walls
-from .detection import DEFAULT, DetectionConfig, crop_mask
+from .detection import DEFAULT, DetectionConfig, crop_xy
 
 
 @dataclass(frozen=True)
@@ -332,13 +332,18 @@ class VesselTracker:
     def __init__(self, config: TrackerConfig | None = None):
         self.config = config or TrackerConfig()
         det = self.config.detection
-        self._occluder_crop = replace(det, max_height_m=max(det.max_height_m,
-                                                            self.config.occluder_top_m))
+        self._occluder_crop = _tracker_crop(self.config)
         self._tracks: list[_Tracked] = []
         self._next_id = 1
         self._time_s: float | None = None
         self.counts = dict.fromkeys(STATUSES, 0)  # over the run
         self._walls = np.zeros((0, 5))  # wall lines seen lately (clusters.remember_walls)
+        # Imported now, not on the first scan with a cluster or the first birth (filterpy's
+        # import takes a second or two): a perception worker builds its tracker while the
+        # loop sets up, instead of stalling a scan in the run.
+        from filterpy.common import Q_discrete_white_noise  # noqa: F401
+        from filterpy.kalman import KalmanFilter  # noqa: F401
+        from scipy.optimize import linear_sum_assignment  # noqa: F401
 
     @property
     def tracks(self) -> tuple:
@@ -346,10 +351,12 @@ class VesselTracker:
         t = math.nan if self._time_s is None else self._time_s
         return tuple(k.snapshot(t) for k in self._tracks)
 
-    def update(self, time_s, points, pose, segments=None) -> TrackerOutput:
+    def update(self, time_s, points, pose, segments=None, cropped: bool = False) -> TrackerOutput:
         """One scan: `points` (N, 3) body frame (x fwd, y stbd, z down) or None, `pose`
         (x, y, psi) of the boat in NED placing the cloud, `segments` (M, 4) the walls
-        `detect_segments` found in the same cloud (x_c, y_c, theta, length)."""
+        `detect_segments` found in the same cloud (x_c, y_c, theta, length). `cropped`:
+        `points` is `crop_for_tracker` of a scan's cloud (empty: the scan had nothing in the crop, not
+        no scan); the same tracks as from the whole cloud."""
         cfg = self.config
         segs = _clean_segments(segments)
         t = _finite_float(time_s)
@@ -361,7 +368,7 @@ class VesselTracker:
         if dt > 0:
             for k in self._tracks:
                 k.predict(dt, cfg)
-        status, cloud = _clean_cloud(points)
+        status, cloud = _clean_cloud(points, allow_empty=cropped)
         p = _finite_pose(pose)
         if status == "dropped_points":  # some rows had NaN: counted, the rest used
             self.counts["dropped_points"] += 1
@@ -374,12 +381,16 @@ class VesselTracker:
             return self._output(t, segs, 0, status)
         # The crop with a taller band: all of it can hide things (free_space), the
         # detection band of it is what the clusters are made of. (Columns one by one:
-        # fast for the column-major clouds LiDAR drivers and the simulator deliver.)
-        idx = np.flatnonzero(crop_mask(cloud, self._occluder_crop))
-        occluders = np.empty((len(idx), 2), cloud.dtype)
-        occluders[:, 0] = cloud[:, 0].take(idx)
-        occluders[:, 1] = cloud[:, 1].take(idx)
-        z = cloud[:, 2].take(idx)
+        # fast for the column-major clouds LiDAR drivers and the simulator deliver.) A
+        # cropped cloud is that crop already (cropping it again keeps every point).
+        if cropped:
+            x, y, z = cloud[:, 0], cloud[:, 1], cloud[:, 2]
+        else:
+            idx, x, y = crop_xy(cloud, self._occluder_crop)
+            z = cloud[:, 2].take(idx)
+        occluders = np.empty((len(x), 2), cloud.dtype)
+        occluders[:, 0] = x
+        occluders[:, 1] = y
         band = (z <= -cfg.detection.min_height_m) & (z >= -cfg.detection.max_height_m)
         xy = occluders[band].astype(float)
         found = find_clusters(xy, p, segs, cfg, self._walls, occluders)
@@ -477,6 +488,21 @@ class VesselTracker:
                 on_vessel |= _segments_on(k, segs, self.config)
         return TrackerOutput(t, tuple(k.snapshot(t) for k in confirmed), segs[~on_vessel],
                              len(self._tracks) - len(confirmed), n_clusters, status)
+
+
+def crop_for_tracker(points, config: TrackerConfig) -> np.ndarray:
+    """The returns of a clean (N, 3) cloud that the tracker reads (detection's crop with a
+    taller height band: all of it can hide things), in the cloud's order: what a process
+    that scans and detects sends to the one that tracks (`update(..., cropped=True)`)
+    instead of the whole cloud. Cropping twice gives the same points."""
+    p = np.asarray(points)
+    return p[crop_xy(p, _tracker_crop(config))[0]]
+
+
+@lru_cache(maxsize=8)
+def _tracker_crop(config: TrackerConfig) -> DetectionConfig:
+    det = config.detection
+    return replace(det, max_height_m=max(det.max_height_m, config.occluder_top_m))
 
 
 # -- what a cluster measures -----------------------------------------------------------
@@ -633,8 +659,9 @@ def _finite_pose(pose):
     return float(p[0]), float(p[1]), float(p[2])
 
 
-def _clean_cloud(points):
-    """("ok" | "dropped_points" | "no_scan" | "bad_points", cloud)."""
+def _clean_cloud(points, allow_empty: bool = False):
+    """("ok" | "dropped_points" | "no_scan" | "bad_points", cloud); an empty cloud is "ok"
+    if `allow_empty` (a cropped one)."""
     if points is None:
         return "no_scan", None
     try:
@@ -644,7 +671,7 @@ def _clean_cloud(points):
     if arr.dtype.kind not in "fiu" or (arr.size and (arr.ndim != 2 or arr.shape[1] != 3)):
         return "bad_points", None
     if arr.size == 0:
-        return "no_scan", None
+        return ("ok", arr.reshape(0, 3).astype(float)) if allow_empty else ("no_scan", None)
     if arr.dtype.kind != "f":
         arr = arr.astype(float)
     if np.isfinite(arr.sum()):

@@ -165,7 +165,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
         for k in range(n_steps):
             t = k * cfg.control_period_s
             est = nav.state if own_estimate else np.asarray(out.estimate, float)
-            outlines, contact, canal_width = world.at(t)
+            outlines, contact, canal_width, clearance = world.at(t)
             t0 = time.perf_counter()
             found = perceive(t, out.state, est)
             if any(a <= t < b for a, b in cfg.lidar_outages_s):
@@ -198,7 +198,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
                 command = np.clip(np.asarray(decision.command, float).reshape(2), -100, 100)
             prev = rows_cmd[-1] if rows_cmd else np.zeros(2)
             rate = (command - prev) / cfg.control_period_s
-            clear = metrics.clearance(out.state[None, :3], outlines)[0]
+            clear = clearance.of(out.state)
             xt = path.cross_track(out.state[:2])
             width = canal_width.at(out.state)
             if cfg.vessels:  # other vessels count for clearance where they are now
@@ -359,7 +359,8 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
 
 class _ChangingOutlines:
     """The true outlines present at a time (an obstacle may be removed during the run), with
-    the collision test and the canal width over them, rebuilt only when the set changes."""
+    the collision test, the canal width and the clearance over them, rebuilt only when the
+    set changes."""
 
     def __init__(self, cfg: LoopConfig):
         self._outlines = tuple(cfg.outlines)
@@ -372,7 +373,8 @@ class _ChangingOutlines:
         if key != self._key:
             present = tuple(o for o, here in zip(self._outlines, key) if here)
             self._key = key
-            self._current = (present, metrics.HullContact(present), metrics.CanalWidth(present))
+            self._current = (present, metrics.HullContact(present), metrics.CanalWidth(present),
+                             metrics.Clearance(present))
         return self._current
 
 

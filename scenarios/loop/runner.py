@@ -145,18 +145,20 @@ def run_scenario(scenario: Scenario, out_dir: Path, controller: str | None = Non
         from dataclasses import replace
 
         scenario = replace(scenario, seed=seed)
-    ctrl = make_controller(scenario, controller)
     cfg = loop_config(scenario, seed)
     viz = _loop_viz(scenario, cfg, out_dir, mcap, live, cloud_points)
     if viz is not None and viz.live_url and events is not None:
         events(0.0, f"live view for Foxglove on {viz.live_url}")
     points = viz.log.options.cloud_points if viz is not None else 0
+    # The perception before the controller: a worker process then starts (imports, tables)
+    # while this one builds the controller and the plant, instead of stalling the first scan.
     try:
         perception = make_perception(scenario, parallel_perception, points)
     except BaseException:
         _close(viz)
         raise
     try:
+        ctrl = make_controller(scenario, controller)
         the_plant = PLANTS[plant](scenario, out_dir)
     except BaseException:
         _close(perception)

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from controller.geometry import (Polyline, distance_to_polylines, point_segment_distance,
-                                 polyline_legs, segments_cross)
+                                 polyline_legs, polyline_segments, segments_cross)
 from controller.nmpc.slack_reference import walls_abeam
 
 HULL_CIRCLE_OFFSETS_M = (2.0, -2.0)
@@ -31,6 +31,51 @@ def clearance(poses, outlines, offsets=HULL_CIRCLE_OFFSETS_M) -> np.ndarray:
     centres = hull_circle_centres(poses, offsets)
     n, k = centres.shape[:2]
     return distance_to_polylines(centres.reshape(-1, 2), outlines).reshape(n, k)
+
+
+class Clearance:
+    """`clearance` of one pose at a time against fixed outlines, the same numbers bit for
+    bit, in a fraction of the time: the outlines' legs are kept in runs of `chunk` with
+    their bounding boxes, and only the runs whose box is no farther than the nearest run's
+    nearest leg are measured (a leg is never nearer than its run's box)."""
+
+    def __init__(self, outlines, offsets=HULL_CIRCLE_OFFSETS_M, chunk: int = 16):
+        self._offsets = offsets
+        a, b = [], []
+        for line in outlines:
+            la, lb = polyline_segments(line)
+            a.append(la)
+            b.append(lb)
+        a = np.concatenate(a) if a else np.zeros((0, 2))
+        b = np.concatenate(b) if b else np.zeros((0, 2))
+        self._a, self._b = a, b
+        starts = np.arange(0, len(a), chunk)
+        self._run_len = np.diff(np.append(starts, len(a)))
+        if len(a):
+            lo, hi = np.minimum(a, b), np.maximum(a, b)
+            self._lo = np.minimum.reduceat(lo, starts)
+            self._hi = np.maximum.reduceat(hi, starts)
+
+    def of(self, pose) -> np.ndarray:
+        """(n_circles,) distance from each hull circle centre of `pose` (x, y, psi) to the
+        nearest outline (inf: none), as `clearance(pose[None], outlines)[0]`."""
+        centres = hull_circle_centres(np.asarray(pose, float)[None, :3], self._offsets)[0]
+        if not len(self._a):
+            return np.full(len(centres), np.inf)
+        gap = np.maximum(np.maximum(self._lo[None] - centres[:, None], centres[:, None]
+                                    - self._hi[None]), 0.0)  # (circles, runs, 2)
+        box = np.hypot(gap[..., 0], gap[..., 1])
+        # Each centre's nearest box's legs bound its distance from above; then every run
+        # whose box is within that bound (the margin covers the boxes' rounding).
+        runs = np.zeros(box.shape[1], bool)
+        runs[np.argmin(box, axis=1)] = True
+        best = self._nearest(centres, runs)
+        runs = (box <= best[:, None] + 1e-6).any(axis=0)
+        return self._nearest(centres, runs)
+
+    def _nearest(self, centres, runs) -> np.ndarray:
+        legs = np.repeat(runs, self._run_len)
+        return point_segment_distance(centres, self._a[legs], self._b[legs]).min(axis=1)
 
 
 HULL_LENGTH_M, HULL_BREADTH_M = 7.9, 2.6

@@ -194,6 +194,30 @@ def _level16(p: float) -> int:
     return int(round(min(max(p, 0.0), 1.0) * 65536))
 
 
+def _pcg64_bytes16(bitgen: np.random.PCG64, n: int) -> np.ndarray:
+    """What `Generator.bytes(2 n)` gives as n uint16 (n >= 1), about four times faster.
+
+    `bytes` draws ceil(2 n / 4) full-range uint32 and keeps their little-endian bytes; a PCG64
+    serves uint32 as the low then the high half of each 64-bit output, holding a spare high
+    half in its state (`has_uint32`, `uinteger`). Here the halves come from `random_raw`
+    (which leaves that spare alone) and the spare is set as the uint32 draws would leave it.
+    """
+    m = (2 * n - 1) // 4 + 1
+    state = bitgen.state
+    out = np.empty(m, np.uint32)
+    k = 0
+    if state["has_uint32"]:
+        out[0] = state["uinteger"]
+        k = 1
+    rest = m - k
+    halves = bitgen.random_raw((rest + 1) // 2).astype("<u8", copy=False).view("<u4")
+    out[k:] = halves[:rest]
+    state = bitgen.state
+    state["has_uint32"], state["uinteger"] = (1, int(halves[-1])) if rest % 2 else (0, 0)
+    bitgen.state = state
+    return out.astype("<u4", copy=False).view("<u2")[:n]
+
+
 def _cross(ax, ay, bx, by):
     return ax * by - ay * bx
 
@@ -810,7 +834,10 @@ class LidarSimulator:
 
     def _uniform16(self, n: int) -> np.ndarray:
         """n uniform 16-bit draws (compare with `_level16`): cheaper than float draws, and
-        probabilities resolved to 1/65536."""
+        probabilities resolved to 1/65536. The bytes of `rng.bytes(2 n)`, bit for bit, and
+        the generator left as that leaves it (`_pcg64_bytes16`)."""
+        if n > 0 and type(self.rng.bit_generator) is np.random.PCG64:
+            return _pcg64_bytes16(self.rng.bit_generator, n)
         return np.frombuffer(self.rng.bytes(2 * n), np.uint16)
 
     def _normal(self, n: int) -> np.ndarray:

@@ -81,17 +81,22 @@ class LidarPerception:
     name = "lidar"
 
     def __init__(self, world: CanalWorld, seed: int = 0, config=None, detection=None,
-                 tracking=None, cloud_points: int = 0):
+                 tracking=None, track_here: bool = True, cloud_points: int = 0):
+        import cv2  # noqa: F401 (detection's; imported here, when a worker starts)
+
         from controller.perception.detection import DEFAULT
         from scenarios.sensors.lidar import LidarSimulator
 
         self.simulator = LidarSimulator(world, config, seed=seed * 7919 + 3)
         self.detection = detection or DEFAULT
         self.tracker = None
+        self.tracking = None  # the tracker's config (None: no tracking)
         if tracking is not False:
-            from controller.perception.tracking import TrackerConfig, VesselTracker
+            from controller.perception.tracking import TrackerConfig
 
-            self.tracker = VesselTracker(tracking or TrackerConfig(detection=self.detection))
+            self.tracking = tracking or TrackerConfig(detection=self.detection)
+            if track_here:  # (else `track` runs in another process: `TrackingHalf`)
+                self.tracker = TrackingHalf(self.tracking)
         self.points_per_scan: list[int] = []
         self.time_s = {"lidar_scan": 0.0, "detection": 0.0, "tracking": 0.0}  # summed wall time
         self.cloud_points = int(cloud_points)
@@ -104,21 +109,30 @@ class LidarPerception:
     def perceive(self, time_s, true_state, estimated_state):
         """One scan's static walls and vessel tracks (a `Percept`), or None for an empty scan
         (the tracks are then predicted inside the tracker, and carried by the feed)."""
-        from controller.perception.feed import Percept
-
-        points, found = self._scan_detect(time_s, true_state, estimated_state)
+        cropped, found = self.scan_for_tracking(time_s, true_state, estimated_state)
         if self.tracker is None:
-            return None if found is None else Percept(found)
-        t0 = time.perf_counter()
-        out = self.tracker.update(time_s, points if found is not None else None,
-                                  np.asarray(estimated_state, float)[:3], found)
-        self.time_s["tracking"] += time.perf_counter() - t0
-        if found is None:
-            return None
-        return Percept(out.static_segments, out.tracks)
+            from controller.perception.feed import Percept
 
-    def _scan_detect(self, time_s, true_state, estimated_state):
+            return None if found is None else Percept(found)
+        out = self.tracker.track(time_s, estimated_state, cropped, found)
+        self.time_s["tracking"] = self.tracker.time_s
+        return out
+
+    def scan_for_tracking(self, time_s, true_state, estimated_state):
+        """`perceive`'s first half, where the cloud is: the returns the tracker reads
+        (`controller.perception.tracking.crop_for_tracker`; None: an empty scan or no
+        tracking) and the scan's segments. A worker process sends these, a fraction of the
+        cloud, to the process that runs `TrackingHalf.track`: the same tracks."""
+        if self.tracking is None:
+            return None, self._scan_detect(time_s, true_state, estimated_state)[1]
+        cropped, found = self._scan_detect(time_s, true_state, estimated_state, crop=True)
+        return (None if found is None else cropped), found
+
+    def _scan_detect(self, time_s, true_state, estimated_state, crop: bool = False):
+        """The scan (or with `crop`, the returns the tracker reads) and its segments (None:
+        an empty scan)."""
         from controller.perception.detection import detect_segments
+        from controller.perception.tracking import crop_for_tracker
 
         true_state = np.asarray(true_state, float)
         t0 = time.perf_counter()
@@ -134,7 +148,38 @@ class LidarPerception:
             self.last_cloud = (at, decimate(points, self.cloud_points))
         if not len(points):
             return points, None  # an empty scan is a failed one (a LiDAR sees its own hull)
-        found = detect_segments(points, np.asarray(estimated_state, float)[:3], self.detection)
+        full = points
+        if crop:
+            points = crop_for_tracker(points, self.tracking)
+            # Detection's crop lies inside the tracker's when they share the detection
+            # config: detecting in the tracker's returns gives the same segments, with
+            # one pass over the whole cloud instead of two.
+        found = detect_segments(points if crop and self.tracking.detection == self.detection
+                                else full, np.asarray(estimated_state, float)[:3],
+                                self.detection)
         self.time_s["lidar_scan"] += t1 - t0
         self.time_s["detection"] += time.perf_counter() - t1
         return points, found
+
+
+class TrackingHalf:
+    """`LidarPerception.perceive`'s second half: the vessel tracker on what
+    `scan_for_tracking` gave, into the `Percept` the controller takes; `time_s` its summed
+    wall time. In the process of the loop when the scans come from a worker process."""
+
+    def __init__(self, config):
+        from controller.perception.tracking import VesselTracker
+
+        self.tracker = VesselTracker(config)
+        self.time_s = 0.0
+
+    def track(self, time_s, estimated_state, cropped, found):
+        from controller.perception.feed import Percept
+
+        t0 = time.perf_counter()
+        out = self.tracker.update(time_s, cropped if found is not None else None,
+                                  np.asarray(estimated_state, float)[:3], found, cropped=True)
+        self.time_s += time.perf_counter() - t0
+        if found is None:
+            return None
+        return Percept(out.static_segments, out.tracks)

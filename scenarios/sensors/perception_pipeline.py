@@ -5,7 +5,10 @@ loop: at t_k the NMPC uses the segments of the scan taken at t_(k-1) (the first 
 its own). Modelling that latency also frees the scan for step k + 1 from waiting for the
 controller and the plant of step k, so a worker process on another core renders and detects it
 meanwhile. Serial and parallel runs make the same scans, in the same order, from the same
-seed, so they give the same segments bit for bit; only the wall time differs.
+seed, so they give the same segments bit for bit; only the wall time differs. With
+`perceive`, the vessel tracker runs in the loop's process on the returns it reads (a fraction
+of the cloud, sent back with the segments): the scan and detection alone are still the larger
+share of a period, and the tracks are the same wherever it runs.
 
 The worker is `python -m scenarios.sensors.perception_pipeline`, spoken to over its stdin and stdout
 with pickled messages: no fork of a process that holds CasADi, fmpy and OpenCV state, and no
@@ -46,7 +49,18 @@ class DelayedLidarPerception:
         self._ready = None  # serial: (result, points, timing) of the last request
         self._requested = None  # the method asked for last ("segments" or "perceive")
         self.last_cloud = None
-        args = (world, seed, config, detection, tracking, cloud_points)
+        self._pending = None  # (time, estimated state) of the scan asked for last
+        # The tracker runs here, on the returns of the scan the worker (or `_inner`) sends:
+        # the two processes' shares of a period are then closer (the worker's, the scan and
+        # detection, is still the larger), and the tracks are the same either way.
+        self._tracking = None
+        if tracking is not False:
+            from controller.perception.detection import DEFAULT
+            from controller.perception.tracking import TrackerConfig
+            from scenarios.sensors.perception import TrackingHalf
+
+            self._tracking = TrackingHalf(tracking or TrackerConfig(detection=detection or DEFAULT))
+        args = (world, seed, config, detection, tracking, False, cloud_points)
         if self.parallel:
             self._worker = _Worker(args)
             self._inner = None
@@ -70,8 +84,16 @@ class DelayedLidarPerception:
         elif self._requested != method:
             raise RuntimeError(f"DelayedLidarPerception: {method}() after "
                                f"{self._requested}() (use one of the two per run)")
-        found = self._collect()
+        found, scanned = self._collect(), self._pending
         self._request(request)
+        if method == "perceive":  # the scan's returns and segments: track them here
+            cropped, segs = found
+            if self._tracking is None:
+                from controller.perception.feed import Percept
+
+                return None if segs is None else Percept(segs)
+            found = self._tracking.track(*scanned, cropped, segs)
+            self.time_s["tracking"] = self._tracking.time_s
         return found
 
     def close(self) -> None:
@@ -86,6 +108,9 @@ class DelayedLidarPerception:
 
     def _request(self, request) -> None:
         self._requested = request[0]
+        self._pending = (request[1], request[3])
+        if request[0] == "perceive":
+            request = ("scan_for_tracking", *request[1:])
         if self._worker is not None:
             self._worker.send(request)
             return
@@ -119,6 +144,8 @@ class _Worker:
             raise PerceptionWorkerError(f"perception worker: could not start "
                                         f"{sys.executable}: {exc}") from None
         self._finalizer = weakref.finalize(self, _stop, self._proc)
+        for pipe in (self._proc.stdin, self._proc.stdout):
+            _widen(pipe)
         self.send(args)
 
     def send(self, message) -> None:
@@ -151,6 +178,28 @@ class _Worker:
         return PerceptionWorkerError(
             f"perception worker (pid {self._proc.pid}) stopped answering "
             f"(exit code {code}); its error, if any, is on stderr above")
+
+
+def _widen(pipe, size: int = 1 << 20) -> None:
+    """Let a pipe hold a whole reply (a scan's segments and the tracker's returns, a few
+    hundred kB): the worker then writes it at once and goes on, instead of waiting in 64 kB
+    pieces for the loop to read. Linux only, and only as far as the system allows."""
+    try:
+        import fcntl
+    except ImportError:  # (not on Windows)
+        return
+    setsize = getattr(fcntl, "F_SETPIPE_SZ", None)
+    if setsize is None:
+        return
+    try:
+        with open("/proc/sys/fs/pipe-max-size") as f:
+            size = min(size, int(f.read()))
+    except (OSError, ValueError):
+        pass
+    try:
+        fcntl.fcntl(pipe.fileno(), setsize, size)
+    except OSError:
+        pass
 
 
 def _stop(proc: subprocess.Popen) -> None:
@@ -190,7 +239,7 @@ def _serve(inp, out) -> int:
         else:
             try:
                 method, *inputs = request
-                if method not in ("segments", "perceive"):
+                if method not in ("segments", "scan_for_tracking"):  # (tracking: the caller's)
                     raise ValueError(f"perception worker: no method {method!r}")
                 found = getattr(perception, method)(*inputs)
                 reply = ("ok", found, perception.points_per_scan[-1], dict(perception.time_s),

@@ -463,6 +463,34 @@ def test_same_scans_same_tracks():
     assert runs[0] == runs[1] and any(runs[0])
 
 
+def test_the_crop_for_the_tracker_gives_the_same_tracks():
+    """A tracker fed only its crop of each scan (what a perception worker sends it), and
+    detection run on that crop, give the tracks and static segments of the whole clouds,
+    bit for bit; a scan with nothing in the crop is a scan (the tracks miss), not no scan."""
+    from controller.perception.tracking import crop_for_tracker
+
+    sim = LidarSimulator(canal(), seed=12)
+    whole, cropped = VesselTracker(), VesselTracker()
+    cfg = whole.config
+    for k in range(30):
+        t = k / RATE_HZ
+        pose = (70.0 + 2.0 * t, 3.0, 0.0)
+        pts = sim.scan(pose, 2.0, time_s=t, extra_obstacles=[
+            Obstacle(TOUR_BOAT.outline(t), z_top_m=TOUR_BOAT.height_m)])
+        crop = crop_for_tracker(pts, cfg)
+        assert len(crop) < len(pts)
+        segs = detect_segments(pts, pose)
+        assert np.array_equal(detect_segments(crop, pose), segs)
+        a = whole.update(t, pts, pose, segs)
+        b = cropped.update(t, crop, pose, segs, cropped=True)
+        assert [tr.as_record() for tr in a.tracks] == [tr.as_record() for tr in b.tracks]
+        assert np.array_equal(a.static_segments, b.static_segments)
+    assert a.tracks  # the tour boat was followed
+    out = cropped.update(3.0, np.zeros((0, 3), np.float32), pose, np.zeros((0, 4)), cropped=True)
+    assert out.status == "ok" and out.tracks[0].misses == 1
+    assert cropped.update(3.1, None, pose, None, cropped=True).status == "no_scan"
+
+
 def _coasting_tracker():
     tracker = VesselTracker()
     feed(tracker, AWAY, np.arange(0.0, 2.0, 0.1))

@@ -95,3 +95,20 @@ def test_separation_by_place_splits_wide_and_narrow_stretches():
     assert got["max_centre_offset_narrow_m"] == pytest.approx(1.0)
     none = metrics.separation_by_place(clearance[:2], width[:2], hull[:2], offset[:2], 7.0, 0.1)
     assert none["mean_centre_offset_narrow_m"] is None and none["time_narrow_s"] == 0.0
+
+
+def test_clearance_of_one_pose_is_clearance_bit_for_bit():
+    """The loop's per-pose clearance (measuring only the runs of legs near the boat) gives
+    exactly the numbers of measuring every leg, also far from everything and at vertices."""
+    from scenarios.results.metrics import Clearance, clearance
+
+    rng = np.random.default_rng(3)
+    wall = np.column_stack([np.linspace(0, 300, 241), 8 * np.sin(np.linspace(0, 6, 241))])
+    outlines = (wall, wall + (0.0, 15.0), np.array([[100, 5], [110, 5], [110, 7], [100, 7],
+                                                     [100, 5.0]]))
+    c = Clearance(outlines, chunk=8)
+    poses = [np.array([*rng.uniform((-50, -40), (350, 60)), rng.uniform(-4, 4)])
+             for _ in range(400)] + [np.array([100.0, 5.0, 0.0]), np.array([1e4, 0.0, 1.0])]
+    for pose in poses:
+        assert c.of(pose).tobytes() == clearance(pose[None], outlines)[0].tobytes()
+    assert np.all(Clearance(()).of(poses[0]) == np.inf)
