@@ -45,3 +45,21 @@ def test_ci_runs_the_readme_test_command():
     assert command in readme, "the README's test command and .ci/run must stay the same"
     blocks = re.findall(r"```(?:sh|bash)?\n(.*?)```", readme, re.S)
     assert command in blocks[1], "the test command is the README's second command"
+
+
+def test_whole_number_options_name_the_option_and_the_bound(capsys):
+    import pytest
+
+    for argv, message in ((["run", "scenarios/straight.toml", "--seed", "-1"],
+                           "argument --seed: must be >= 0, got -1"),
+                          (["run", "scenarios/straight.toml", "--mcap-points", "x"],
+                           "argument --mcap-points: expected a whole number >= 0, got 'x'"),
+                          (["sweep", "study.toml", "--workers", "0"],
+                           "argument --workers: must be >= 1, got 0"),
+                          (["bridge", "--mcap-points", "2.5"],
+                           "argument --mcap-points: expected a whole number >= 0, got '2.5'")):
+        with pytest.raises(SystemExit) as exit_:
+            main(argv)
+        assert exit_.value.code == 2
+        err = capsys.readouterr().err
+        assert message in err and "Traceback" not in err

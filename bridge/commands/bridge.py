@@ -57,12 +57,13 @@ def register(sub) -> None:
                    "machine only) unless given, e.g. 0.0.0.0:8765 to reach it over the boat's "
                    "network. Never slows the 10 Hz loop (a slow viewer loses messages). Needs "
                    "pip install 'canalnav[viz]'")
-    from scenarios.results.mcap_log import DEFAULT_CLOUD_POINTS, cloud_points_arg
+    from scenarios.commands.arguments import whole_number
+    from scenarios.results.mcap_log import DEFAULT_CLOUD_POINTS
 
     p.add_argument("--mcap", action=argparse.BooleanOptionalAction, default=None,
                    help="write run.mcap into --log DIR (default: when the viz extra is "
                    "installed, which --mcap then requires)")
-    p.add_argument("--mcap-points", type=cloud_points_arg, default=DEFAULT_CLOUD_POINTS,
+    p.add_argument("--mcap-points", type=whole_number(0), default=DEFAULT_CLOUD_POINTS,
                    metavar="N", help=f"LiDAR points kept per scan (default {DEFAULT_CLOUD_POINTS})")
     p.add_argument("--system-id", type=int, default=255, metavar="N",
                    help="our MAVLink system id (default 255: ArduPilot's GCS id, the only one "

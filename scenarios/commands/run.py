@@ -7,16 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-
-def seed_arg(text: str) -> int:
-    """--seed: a whole number >= 0 (numpy's generators take no negative seeds)."""
-    try:
-        seed = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}") from None
-    if seed < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {seed}")
-    return seed
+from scenarios.commands.arguments import seed_number, whole_number
 
 
 def _assignment(text: str):
@@ -45,14 +36,14 @@ def load_with_overrides(path: str, overrides):
 
 def add_viz_arguments(p, live: bool = True) -> None:
     """--mcap/--no-mcap, --mcap-points and (for a single run) --live."""
-    from scenarios.results.mcap_log import DEFAULT_CLOUD_POINTS, cloud_points_arg
+    from scenarios.results.mcap_log import DEFAULT_CLOUD_POINTS
 
     p.add_argument("--mcap", action=argparse.BooleanOptionalAction, default=None,
                    help="write run.mcap (Foxglove's schemas: frames, LiDAR cloud, walls, "
                    "segments, plan, hull circles, tracks, GPS fix, per-step figures); default: "
                    "when the viz extra is installed (pip install 'canalnav[viz]'), which --mcap "
                    "then requires")
-    p.add_argument("--mcap-points", type=cloud_points_arg, default=DEFAULT_CLOUD_POINTS,
+    p.add_argument("--mcap-points", type=whole_number(0), default=DEFAULT_CLOUD_POINTS,
                    metavar="N", help="LiDAR points kept per scan for run.mcap and --live, "
                    f"every k-th (default {DEFAULT_CLOUD_POINTS}; 0: no cloud)")
     if live:
@@ -78,7 +69,7 @@ def register(sub) -> None:
                    help="change a scenario key by its dotted path, as a TOML value (e.g. "
                    "--set current.east_mps=0.2 --set plant.boat.Nr=-2500); repeatable")
     p.add_argument("--out", default=None, help="output folder (default runs/<scenario>-<controller>)")
-    p.add_argument("--seed", type=seed_arg, default=None,
+    p.add_argument("--seed", type=seed_number, default=None,
                    help="noise seed, a whole number >= 0 (default: the scenario's)")
     p.add_argument("--plant", default="fmu", help="plant: fmu (default), python-model, mavlink-sim")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")

@@ -9,17 +9,7 @@ at the end. Exits 0 when every run ran (whatever its outcome), 1 when a run rais
 
 from __future__ import annotations
 
-
-def _workers(text: str) -> int:
-    import argparse
-
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}") from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {n}")
-    return n
+from scenarios.commands.arguments import whole_number
 
 
 def add_engine_options(p) -> None:
@@ -28,7 +18,7 @@ def add_engine_options(p) -> None:
                    help="an existing Dask scheduler, e.g. tcp://HOST:8786 (its workers need "
                    "only the package; the scenario files travel with the runs); default: a "
                    "local cluster")
-    p.add_argument("--workers", type=_workers, default=None, metavar="N",
+    p.add_argument("--workers", type=whole_number(1), default=None, metavar="N",
                    help="workers of the local cluster (default: one per core)")
     p.add_argument("--resume", action="store_true",
                    help="continue the study in --out: skip the runs that finished (runs that "

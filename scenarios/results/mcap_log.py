@@ -71,19 +71,6 @@ def parse_live(text: str, option: str = "--live") -> tuple[str, int]:
     return host, p
 
 
-def cloud_points_arg(text: str) -> int:
-    """--mcap-points: a whole number >= 0."""
-    import argparse
-
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}") from None
-    if n < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {n}")
-    return n
-
-
 class VizLog:
     """The channels of a run in one Foxglove context, to an MCAP file and/or a live server."""
 

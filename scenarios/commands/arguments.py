@@ -1,0 +1,26 @@
+"""Option types the subcommands share: argparse `type=` functions that turn a bad value into
+argparse's one-line usage error (naming the option) instead of a traceback."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def whole_number(minimum: int = 0):
+    """The type of an option that takes a whole number >= `minimum` (a seed, a count)."""
+
+    def parse(text: str) -> int:
+        try:
+            n = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"expected a whole number >= {minimum}, got {text!r}") from None
+        if n < minimum:
+            raise argparse.ArgumentTypeError(f"must be >= {minimum}, got {n}")
+        return n
+
+    parse.__name__ = f"whole number >= {minimum}"  # (argparse names the type in some errors)
+    return parse
+
+
+seed_number = whole_number(0)  # numpy's generators take no negative seeds
