@@ -145,6 +145,7 @@ class OusterUdpSensor:
             info = load_metadata(metadata, self.spec)
         else:
             info = fetch_metadata(host, self.spec)
+        self.info = info  # the sensor's metadata (`SensorInfo`): saved, or fetched from it
         port = lidar_port or info.config.udp_port_lidar or 7502
         self._decoder = FrameDecoder(info)
         self.clock = DeviceClock()

@@ -173,3 +173,38 @@ def test_ouster_live_udp_clock_and_garbage(info, original, tmp_path):
     finally:
         out.close()
         sensor.close()
+
+
+def test_ouster_metadata_fetched_from_the_sensors_http_api(info, tmp_path):
+    """Without a saved metadata JSON the sensor's own is fetched over its HTTP API (the
+    SDK's client): the beams and the packet format are the sensor's; a host that does not
+    answer is a clear error saying how to give the metadata instead."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from bridge.lidar.ouster import fetch_metadata
+
+    op.write_metadata(tmp_path / "os.json", info)
+    server = subprocess.Popen([sys.executable, str(Path(__file__).with_name("ouster_http.py")),
+                               str(tmp_path / "os.json")], stdout=subprocess.PIPE, text=True)
+    try:
+        port = int(server.stdout.readline())
+        sensor = OusterUdpSensor("front", f"127.0.0.1:{port}", None, lidar_port=0,
+                                 listen="127.0.0.1")
+        got = sensor.info
+        assert got.sn == info.sn and got.prod_line == info.prod_line
+        assert got.format.columns_per_frame == info.format.columns_per_frame
+        assert got.format.pixels_per_column == info.format.pixels_per_column
+        assert np.allclose(got.beam_altitude_angles, info.beam_altitude_angles)
+        sensor.close()
+    finally:
+        server.kill()
+        server.wait()
+    dead = socket.socket()
+    dead.bind(("127.0.0.1", 0))
+    closed = dead.getsockname()[1]
+    dead.close()  # (nothing listens there now)
+    with pytest.raises(InputError, match=r"cannot fetch the sensor's metadata from "
+                       rf"127\.0\.0\.1:{closed} .*give a saved metadata JSON"):
+        fetch_metadata(f"127.0.0.1:{closed}", f"ouster:127.0.0.1:{closed}")
