@@ -77,17 +77,21 @@ class WaypointPath:
         s_min = min(s_min, s_max)
         legs = np.nonzero((cum[:-1] <= s_max) & (cum[1:] >= s_min))[0]
         p = np.asarray(points, float).reshape(-1, 2)
-        d = p[:, None, :] - self.start[legs][None]  # (N, legs, 2)
-        dx, dy = self.delta[legs, 0], self.delta[legs, 1]
-        along = (d[..., 0] * dx + d[..., 1] * dy) / L[legs]
-        s = np.clip(cum[legs] + along, np.maximum(cum[legs], s_min), np.minimum(cum[legs + 1], s_max))
-        t = (s - cum[legs]) / L[legs]
-        rx = d[..., 0] - t * dx
-        ry = d[..., 1] - t * dy
+        start, dx, dy = self.start[legs], self.delta[legs, 0], self.delta[legs, 1]
+        length, at = L[legs], cum[legs]
+        px = p[:, 0:1] - start[:, 0]  # (N, legs): no (N, legs, 2) temporary, no np.clip
+        py = p[:, 1:2] - start[:, 1]
+        along = (px * dx + py * dy) / length
+        s = np.minimum(np.maximum(at + along, np.maximum(at, s_min)),
+                       np.minimum(cum[legs + 1], s_max))
+        t = (s - at) / length
+        rx = px - t * dx
+        ry = py - t * dy
         best = np.argmin(rx * rx + ry * ry, axis=1)
         rows = np.arange(len(p))
-        side = (dx[best] * ry[rows, best] - dy[best] * rx[rows, best]) / L[legs][best]
-        offset = np.hypot(rx[rows, best], ry[rows, best])
+        rx, ry = rx[rows, best], ry[rows, best]
+        side = (dx[best] * ry - dy[best] * rx) / length[best]
+        offset = np.hypot(rx, ry)
         return s[rows, best], np.where(side >= 0.0, offset, -offset)
 
     def at(self, s) -> tuple[np.ndarray, np.ndarray]:
