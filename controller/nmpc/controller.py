@@ -12,19 +12,19 @@ the caller must stop the boat.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..errors import InputError, SolverError, finite_number
-from ..geometry import unwrap_near
 from .problem import NU, NX, NX_BOAT, NmpcConfig, ParamLayout, build_ocp, pack_params
 from .reference import Reference, WaypointPath, reference_trajectory, waypoint_path
 from .rti import QpOptions, QpStep, SqpResult, sqp
 from .passage import WayAhead
 from .seamanship import Shaping, assess
-from .segment_slots import SLOT_FIELDS, check_segments, select_segments
+from .segment_slots import SLOT_FIELDS, check_segments, select_checked
 from .slack_reference import forced_slack
 from .vessel_slots import predict_vessels
 
@@ -97,6 +97,9 @@ def steady_throttle(speed_mps, boat) -> np.ndarray:
 
 
 def _finite_vector(value, size: int, what: str) -> np.ndarray:
+    if type(value) is np.ndarray and value.shape == (size,) and value.dtype == np.float64:
+        if np.isfinite(value).all():  # the common case, in a fifth of the time
+            return value  # as np.asarray would: the same array
     try:
         arr = np.asarray(value, float)
     except (TypeError, ValueError):
@@ -108,6 +111,11 @@ def _finite_vector(value, size: int, what: str) -> np.ndarray:
     if not np.isfinite(arr).all():
         raise InputError(f"{what}: contains NaN or infinity: {arr.tolist()}")
     return arr
+
+
+def _unwrap_near(angle: float, reference: float) -> float:
+    """`geometry.unwrap_near` for two floats, without numpy's overhead."""
+    return reference + ((angle - reference + math.pi) % (2.0 * math.pi) - math.pi)
 
 
 def top_speed_mps(boat, throttle_pct: float = 100.0) -> float:
@@ -163,6 +171,14 @@ class NmpcController:
                 linearisation = self.compiled_info.function
                 compile = lambda f: compile_cached(f).function  # noqa: E731
             self._qp = QpStep(self.ocp, linearisation, qp, compile)
+        self._act_lo = np.array([-config.nT_max, -config.nS_max])
+        self._act_hi = -self._act_lo
+        self._rate_max = np.array([config.dnT_max, config.dnS_max])
+        self._x0_boat = self._x0_at[:NX_BOAT]
+        self._x1_xy_at = self.ocp.states_at[1:, :2]
+        self._stages = np.arange(1, config.horizon + 1, dtype=float)
+        self._widen_m = max(abs(o) for o in config.hull_offsets_m)
+        self._shift_cache: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._p = self._params.copy()
         self._w_ref = np.zeros(self.ocp.nw)
         self._lbw_step, self._ubw_step = self._lbw.copy(), self._ubw.copy()
@@ -246,7 +262,7 @@ class NmpcController:
         c = self.config
         x = _finite_vector(state, 6, "state [x, y, psi, u, v, r]")
         act = _finite_vector(actuators, 2, "actuators [nT, nS]")
-        act = np.clip(act, [-c.nT_max, -c.nS_max], [c.nT_max, c.nS_max])
+        act = np.minimum(np.maximum(act, self._act_lo), self._act_hi)
         current = _finite_vector(current, 2, "current [north, east]")
         bias = _finite_vector(bias, 3, "bias [b_u, b_v, b_r]")
         self._set_path(waypoints)
@@ -263,7 +279,7 @@ class NmpcController:
         else:
             prepared, guess = None, self._shifted_plan(elapsed)
         if guess is not None:
-            x[2] = float(unwrap_near(x[2], guess[self.ocp.state_index(0)][2]))
+            x[2] = _unwrap_near(float(x[2]), float(guess[self._x0_at[2]]))
         segs = check_segments(segments)
         vessels = tuple(v for v in vessels if getattr(v, "moving", True))
         s, d = self._path.frame(x[None, :2], self._progress_m,
@@ -278,8 +294,7 @@ class NmpcController:
                                          c.step_s, self._progress_m, self.search_ahead_m,
                                          stop_at, c.stop_decel_mps2, current, rules.offset_m)
         planned = reference.states[:, :2] if guess is None else guess[self._xy_at]
-        selection = select_segments(segs, x[:2], c.segment_slots, c.segment_range_m,
-                                    planned)
+        selection = select_checked(segs, x[:2], c.segment_slots, c.segment_range_m, planned)
         slots = self._keep_slots(selection.slots)
         vessel_sel = predict_vessels(vessels, c.vessel_slots, c.horizon, c.step_s, planned,
                                      x[:2])
@@ -291,7 +306,7 @@ class NmpcController:
         p[lay.segments] = slots.reshape(-1)
         x_init = np.concatenate([x, act])
         lbw, ubw = self._lbw_step, self._ubw_step
-        lbw[self._x0_at[:NX_BOAT]] = ubw[self._x0_at[:NX_BOAT]] = x_init
+        lbw[self._x0_boat] = ubw[self._x0_boat] = x_init
         slack_ref = self._slack_reference(reference, speed, guess, x[:2], slots)
         w_ref = self._w_ref
         w_ref[self._ref_at] = reference.states
@@ -397,6 +412,8 @@ class NmpcController:
         the order of the slots does not change the OCP, and a set of slots unchanged from
         the prepared step lets the feedback keep the prepared constraints."""
         prev = self._slots_prev
+        if prev is not None and (slots == prev).all():
+            return prev  # the same segments in the same slots (a static map, a still scene)
         self._slots_prev = slots
         if prev is None:
             return slots
@@ -453,16 +470,31 @@ class NmpcController:
         stages, extrapolated past the last one)."""
         if self._plan is None:
             return None
+        at = self._shift_cache.get(elapsed_s)
+        if at is None:
+            if len(self._shift_cache) > 8:  # elapsed times measured by a caller: keep a few
+                self._shift_cache.clear()
+            at = self._shift_cache[elapsed_s] = self._shift_indices(elapsed_s)
+        lo, hi, f = at
+        w = self._plan
+        a = w[lo]
+        return a + f * (w[hi] - a)
+
+    def _shift_indices(self, elapsed_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Where in w each entry of the shifted plan interpolates from (lo, hi) and how far
+        (f): states between stages i and i + 1 at i + elapsed / Ts (extrapolated past the
+        last), inputs the same but clamped to their last interval."""
         N, Ts = self.config.horizon, self.config.step_s
-        states, inputs = self.ocp.unpack(self._plan)
+        S, U = self.ocp.states_at, self.ocp.inputs_at
         pos = np.arange(N + 1) + elapsed_s / Ts
         i = np.minimum(pos.astype(int), N - 1)
-        f = (pos - i)[:, None]
-        shifted_states = states[i] + f * (states[i + 1] - states[i])
+        f = np.broadcast_to((pos - i)[:, None], S.shape)
         j = np.minimum(pos[:N].astype(int), N - 2)
-        g = np.clip(pos[:N] - j, 0.0, 1.0)[:, None]
-        shifted_inputs = inputs[j] + g * (inputs[j + 1] - inputs[j])
-        return self.ocp.pack(shifted_states, shifted_inputs)
+        g = np.broadcast_to(np.clip(pos[:N] - j, 0.0, 1.0)[:, None], U.shape)
+        lo, hi, weight = np.empty(self.ocp.nw, int), np.empty(self.ocp.nw, int), np.empty(self.ocp.nw)
+        lo[S], hi[S], weight[S] = S[i], S[i + 1], f
+        lo[U], hi[U], weight[U] = U[j], U[j + 1], g
+        return lo, hi, weight
 
     def _hold(self, guess: np.ndarray, x_init: np.ndarray) -> np.ndarray:
         """An unsolved guess with the actuators held where they are (all rates 0): what a
@@ -474,7 +506,8 @@ class NmpcController:
 
     def _start_at(self, w: np.ndarray, x_init: np.ndarray) -> np.ndarray:
         w = w.copy()
-        w[self.ocp.state_index(0)] = np.concatenate([x_init, [0.0]])
+        w[:NX_BOAT] = x_init  # x_0 leads w (hpipm's stage order), its slack 0
+        w[NX_BOAT] = 0.0
         return w
 
     def _slack_reference(self, reference: Reference, speed_mps: float, guess, position,
@@ -483,14 +516,14 @@ class NmpcController:
         (`slack_reference`), over the path between the stage's reference point and its place in
         the warm start, widened by the hull circles' offsets and half a stage's travel."""
         c = self.config
-        N, Ts = c.horizon, c.step_s
-        arcs = reference.progress_m + speed_mps * Ts * np.arange(1, N + 1)
-        lo, hi = arcs.copy(), arcs.copy()
+        step_m = speed_mps * c.step_s
+        lo = hi = reference.progress_m + step_m * self._stages
         if guess is not None:
-            xy = np.vstack([position, guess[self.ocp.states_at[1:, :2]]])
-            travelled = reference.progress_m + np.cumsum(np.hypot(*np.diff(xy, axis=0).T))
+            xy = guess[self._x1_xy_at]  # stages 1..Np of the warm start
+            dx, dy = np.diff(xy[:, 0], prepend=position[0]), np.diff(xy[:, 1], prepend=position[1])
+            travelled = reference.progress_m + np.cumsum(np.hypot(dx, dy))
             lo, hi = np.minimum(lo, travelled), np.maximum(hi, travelled)
-        widen = max(abs(o) for o in c.hull_offsets_m) + 0.5 * speed_mps * Ts
+        widen = self._widen_m + 0.5 * step_m
         segments = slots[slots[:, -1] > 0, :4]
         return forced_slack(self._path, lo - widen, hi + widen, segments,
                             c.hull_radius_m + c.separation_m, c.slack_min_m)

@@ -58,8 +58,8 @@ class _Frames:
         dist = np.hypot(va, vc)
         side = va * self.normal_along + vc * self.normal_across  # its starboard component
         abeam = np.abs(side) >= _ABEAM_COS * dist
-        port = np.where(abeam & (side < 0), dist, np.inf).min(axis=1)
-        starboard = np.where(abeam & (side > 0), dist, np.inf).min(axis=1)
+        port = np.min(dist, axis=1, where=abeam & (side < 0), initial=np.inf)
+        starboard = np.min(dist, axis=1, where=abeam & (side > 0), initial=np.inf)
         return port, starboard
 
 
