@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -176,6 +176,9 @@ class NmpcController:
         self._rate_max = np.array([config.dnT_max, config.dnS_max])
         self._x0_boat = self._x0_at[:NX_BOAT]
         self._x1_xy_at = self.ocp.states_at[1:, :2]
+        self._u0_rates = self.ocp.inputs_at[0, :2]
+        self._states_boat_at = self.ocp.states_at[:, :NX_BOAT]
+        self._inputs_rates_at = self.ocp.inputs_at[:, :2]
         self._stages = np.arange(1, config.horizon + 1, dtype=float)
         self._widen_m = max(abs(o) for o in config.hull_offsets_m)
         self._shift_cache: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
@@ -197,6 +200,7 @@ class NmpcController:
         self._rules_clear_s = 0.0
         self._prepared: tuple[float, np.ndarray] | None = None  # (elapsed_s, guess)
         self._slots_prev: np.ndarray | None = None
+        self._slot_at: dict[tuple, int] = {}  # a segment (x_c, y_c, theta, length) -> its slot
         self._preparation_s = 0.0
 
     # -- the step ---------------------------------------------------------------------------
@@ -205,15 +209,12 @@ class NmpcController:
              blind: bool = False, bias=(0.0, 0.0, 0.0), vessels=()) -> NmpcStep:
         """One control period: `feedback` for this state, then `prepare` for the next (with
         `split`; the stats count both). Arguments as `feedback`."""
-        out = self.feedback(state, actuators, segments, waypoints, target_speed_mps, current,
-                            elapsed_s, blind, bias, vessels)
         if not self.split:
-            return out
-        preparation = self.prepare()
-        st = out.stats
-        stats = replace(st, time_preparation_s=preparation,
-                        time_total_s=st.time_feedback_s + preparation)
-        return replace(out, stats=stats)
+            return self.feedback(state, actuators, segments, waypoints, target_speed_mps,
+                                 current, elapsed_s, blind, bias, vessels)
+        done = self._feedback(state, actuators, segments, waypoints, target_speed_mps,
+                              current, elapsed_s, blind, bias, vessels)
+        return self._output(*done, self.prepare())
 
     def prepare(self, elapsed_s: float | None = None) -> float:
         """The preparation phase of the real-time iteration, right after a command is sent:
@@ -258,6 +259,15 @@ class NmpcController:
         Where the segments leave no passage along the route, or when blind, the reference
         slows the boat to a stop short of it and holds (`passage`); `stats.waiting` says why.
         """
+        done = self._feedback(state, actuators, segments, waypoints, target_speed_mps,
+                              current, elapsed_s, blind, bias, vessels)
+        preparation, self._preparation_s = self._preparation_s if done[-1] else 0.0, 0.0
+        return self._output(*done, preparation)
+
+    def _feedback(self, state, actuators, segments, waypoints, target_speed_mps: float,
+                  current, elapsed_s, blind, bias, vessels) -> tuple:
+        """The feedback up to the command; returns what `_output` needs (ends with whether the
+        step used a preparation)."""
         t0 = time.perf_counter(), time.thread_time()
         c = self.config
         x = _finite_vector(state, 6, "state [x, y, psi, u, v, r]")
@@ -345,9 +355,10 @@ class NmpcController:
                 fallback, plan = "shifted_plan", self._start_at(guess, x_init)
         self._plan = plan
         self._progress_m = reference.progress_m
-        preparation, self._preparation_s = (self._preparation_s if prepared else 0.0), 0.0
-        return self._output(plan, act, reference, result, fallback, t0, selection, stop,
-                            vessel_sel, rules, fed_back, preparation)
+        command = self._command(plan, act)  # what leaves now: the feedback ends here
+        times = time.perf_counter() - t0[0], time.thread_time() - t0[1]
+        return (plan, command, reference, result, fallback, times, selection, stop,
+                vessel_sel, rules, fed_back, prepared is not None)
 
     # -- pieces -----------------------------------------------------------------------------
     def _rules(self, s: float, d: float, vessels, segments, speed_mps: float,
@@ -410,27 +421,40 @@ class NmpcController:
     def _keep_slots(self, slots: np.ndarray) -> np.ndarray:
         """The selected segments with each one still selected in the slot it had last step:
         the order of the slots does not change the OCP, and a set of slots unchanged from
-        the prepared step lets the feedback keep the prepared constraints."""
+        the prepared step lets the feedback keep the prepared constraints. (Rows matched
+        through a dict of last step's: 16 lookups cost less than the 16 x 16 comparison.)"""
         prev = self._slots_prev
         if prev is not None and (slots == prev).all():
             return prev  # the same segments in the same slots (a static map, a still scene)
-        self._slots_prev = slots
-        if prev is None:
-            return slots
-        active, was = slots[:, -1] > 0, prev[:, -1] > 0
-        same = (slots[:, None, :4] == prev[None, :, :4]).all(axis=2)
-        same &= active[:, None] & was[None, :]
-        matched = same.any(axis=1)
-        old_at = same.argmax(axis=1)[matched]
-        if not matched.any() or np.bincount(old_at).max() > 1:  # none kept, or a duplicate
+        out = slots
+        if prev is not None:
+            out = self._matched_slots(slots)
+        self._slots_prev = out
+        self._slot_at = {}
+        for j, row in enumerate(out.tolist()):  # where each active segment sits now
+            if row[4] > 0:
+                self._slot_at.setdefault(tuple(row[:4]), j)
+        return out
+
+    def _matched_slots(self, slots: np.ndarray) -> np.ndarray:
+        """`slots` reordered so that each segment of last step's slots keeps its slot, the
+        new ones in the free slots in order; unchanged when none is kept or two match one."""
+        old_at, matched, rest = [], [], []
+        for i, row in enumerate(slots.tolist()):
+            if row[4] > 0:
+                j = self._slot_at.get(tuple(row[:4]))
+                if j is None:
+                    rest.append(i)
+                else:
+                    old_at.append(j)
+                    matched.append(i)
+        if not old_at or len(set(old_at)) < len(old_at):  # none kept, or a duplicate
             return slots
         out = np.zeros_like(slots)
         out[old_at] = slots[matched]
-        taken = np.zeros(len(slots), bool)
-        taken[old_at] = True
-        rest = np.flatnonzero(active & ~matched)
-        out[np.flatnonzero(~taken)[: len(rest)]] = slots[rest]
-        self._slots_prev = out
+        taken = set(old_at)
+        free = [j for j in range(len(slots)) if j not in taken]
+        out[free[: len(rest)]] = slots[rest]
         return out
 
     def _feed_back(self, w, p, w_ref, lbw, ubw) -> SqpResult:
@@ -442,7 +466,7 @@ class NmpcController:
                              max(r.qp_iterations, 0), np.inf, r.time_linearisation_s,
                              r.time_qp_s)
         new = w + r.dw
-        norm = float(np.max(np.abs(r.dw)))
+        norm = float(np.abs(r.dw).max())
         result = SqpResult(new, True, norm < self.sqp_tol, r.status, 1, max(r.qp_iterations, 0),
                            norm, r.time_linearisation_s, r.time_qp_s)
         if not self._plausible(new, lbw, ubw):
@@ -555,33 +579,36 @@ class NmpcController:
         inputs[:, 2] = states[1:, NX - 1]
         return self.ocp.pack(states, inputs)
 
-    def _output(self, plan, act, reference, result: SqpResult, fallback: str,
-                t0: tuple[float, float], selection, stop=None, vessel_sel=None,
-                rules=None, fed_back: bool = False, preparation_s: float = 0.0) -> NmpcStep:
+    def _command(self, plan: np.ndarray, act: np.ndarray) -> tuple:
+        """The plan's first move as a command: (command, rates, clipped)."""
         c = self.config
-        states, inputs = self.ocp.unpack(plan)
-        rate_max = np.array([c.dnT_max, c.dnS_max])
-        rates = np.clip(inputs[0, :2], -rate_max, rate_max)
+        rates_planned = plan[self._u0_rates]
+        rates = np.minimum(np.maximum(rates_planned, -self._rate_max), self._rate_max)
         wanted = act + rates * c.control_period_s
-        command = np.clip(wanted, [-c.nT_max, -c.nS_max], [c.nT_max, c.nS_max])
-        clipped = bool(np.abs(rates - inputs[0, :2]).max() > 1e-6
+        command = np.minimum(np.maximum(wanted, self._act_lo), self._act_hi)
+        clipped = bool(np.abs(rates - rates_planned).max() > 1e-6
                        or np.abs(command - wanted).max() > 1e-6)
+        return command, rates, clipped
+
+    def _output(self, plan, command, reference, result: SqpResult, fallback: str,
+                times: tuple[float, float], selection, stop, vessel_sel, rules,
+                fed_back: bool, prepared: bool, preparation_s: float) -> NmpcStep:
+        """The step as the caller gets it: `times` are the feedback's (wall, CPU), the
+        preparation's seconds (the one before this feedback, or with `split` the one after)
+        count in the step's total."""
+        command, rates, clipped = command
         stats = SolverStats(
             method=self.method, ok=result.ok, converged=result.converged, status=result.status,
             fallback=fallback, sqp_iterations=result.sqp_iterations,
             qp_iterations=result.qp_iterations,
             consecutive_failures=self.consecutive_failures,
-            time_total_s=time.perf_counter() - t0[0], cpu_time_s=time.thread_time() - t0[1],
+            time_total_s=times[0] + preparation_s, cpu_time_s=times[1],
             time_linearisation_s=result.time_linearisation_s, time_qp_s=result.time_qp_s,
             segments_dropped=selection.dropped, dropped_nearest_m=selection.dropped_nearest_m,
             command_clipped=clipped, waiting="" if stop is None else stop.reason,
             blocked_at_m=None if stop is None else stop.blocked_at_m,
-            vessels=() if vessel_sel is None else vessel_sel.ids,
-            vessels_dropped=0 if vessel_sel is None else vessel_sel.dropped,
-            rules="" if rules is None else rules.reason, fed_back=fed_back)
-        feedback_s = time.perf_counter() - t0[0]
-        stats = replace(stats, time_feedback_s=feedback_s,
-                        time_total_s=feedback_s + preparation_s,
-                        time_preparation_s=preparation_s, cpu_time_s=time.thread_time() - t0[1])
-        return NmpcStep(command, rates, states[:, :NX_BOAT].copy(), inputs[:, :2].copy(),
-                        states[1:, NX - 1].copy(), reference, stats)
+            vessels=vessel_sel.ids, vessels_dropped=vessel_sel.dropped,
+            rules=rules.reason, fed_back=fed_back, time_feedback_s=times[0],
+            time_preparation_s=preparation_s)
+        return NmpcStep(command, rates, plan[self._states_boat_at], plan[self._inputs_rates_at],
+                        plan[self._slack_ref_at], reference, stats)
