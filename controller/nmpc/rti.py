@@ -218,6 +218,11 @@ class QpStep:
         self._linearise_hpipm(w, p)
         self._set_bounds(w, lbw, ubw)
         self.qp.set(SET_DYNAMICS | SET_CONSTRAINTS | SET_BOUNDS, 1)
+        # stage 0's input bounds too (u_0 is the guess's, which the feedback keeps): left
+        # out, the QP kept those of the last full solve, around an older u_0, and the step's
+        # first move could break its rate limits once the plan changed enough (a way that
+        # opens: the prepared QP failed where the one-phase step did not)
+        self.qp.set(SET_BOUNDS, 0, 1)
         self.prepared = True
         return True
 
