@@ -127,15 +127,15 @@ def top_speed_mps(boat, throttle_pct: float = 100.0) -> float:
 class NmpcController:
     """The paper's NMPC, solved by real-time iteration ("rti"), SQP to convergence ("sqp")
     or IPOPT ("ipopt"). `compiled` uses the cached C linearisation (RTI, SQP). `split`: RTI
-    in two phases (`prepare` after each command, `feedback` when the state comes); off by
-    default while one case is open: when the way ahead opens (a blocking segment vanishes),
-    the prepared QP failed once where the one-phase step does not (the safe-guess retry
-    caught it; tests/controller/test_nmpc_blocked_way.py with split=True shows it)."""
+    in two phases (`prepare` after each command, `feedback` when the state comes), on by
+    default: the answer is the one-phase step's (bit for bit on the bench and in
+    tests/controller/test_nmpc_blocked_way.py, where the way ahead opens), the command
+    leaves after the feedback alone; `split=False` does the whole step in `feedback`."""
 
     def __init__(self, config: NmpcConfig = NmpcConfig(), method: str = "rti",
                  qp: QpOptions = QpOptions(), compiled: bool = True, sqp_max_iter: int = 50,
                  sqp_tol: float = 1e-3, max_failures: int = 3,
-                 reference_search_ahead_m: float = 50.0, split: bool = False):
+                 reference_search_ahead_m: float = 50.0, split: bool = True):
         if method not in METHODS:
             raise InputError(f"NMPC method {method!r}: choose one of {', '.join(METHODS)}")
         if max_failures < 1:
