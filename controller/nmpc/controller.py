@@ -176,7 +176,6 @@ class NmpcController:
         self._rate_max = np.array([config.dnT_max, config.dnS_max])
         self._x0_boat = self._x0_at[:NX_BOAT]
         self._x1_xy_at = self.ocp.states_at[1:, :2]
-        self._xy_buffer = np.zeros((config.horizon + 1, 2))
         self._u0_rates = self.ocp.inputs_at[0, :2]
         self._states_boat_at = self.ocp.states_at[:, :NX_BOAT]
         self._inputs_rates_at = self.ocp.inputs_at[:, :2]
@@ -409,7 +408,7 @@ class NmpcController:
         self._progress_m = 0.0
         self._pieces: np.ndarray | None = None  # the path's, for the slack reference
         self._piece_distance_cache: dict[tuple, np.ndarray] = {}  # a segment's to them
-        self._slot_pieces: tuple = (None, None, None)  # (slots, their segments, distances)
+        self._slot_pieces: tuple = (None, None)  # (slots, their distances to the pieces)
 
     def _solve(self, w, p, w_ref, lbw, ubw) -> SqpResult:
         if self.method == "ipopt":
@@ -547,23 +546,17 @@ class NmpcController:
         step_m = speed_mps * c.step_s
         lo = hi = reference.progress_m + step_m * self._stages
         if guess is not None:
-            xy = self._xy_buffer  # the boat, then stages 1..Np of the warm start
-            xy[0] = position
-            xy[1:] = guess[self._x1_xy_at]
-            d = xy[1:] - xy[:-1]  # (np.diff with prepend costs ten times as much)
-            travelled = reference.progress_m + np.cumsum(np.hypot(d[:, 0], d[:, 1]))
+            xy = guess[self._x1_xy_at]  # stages 1..Np of the warm start
+            dx, dy = np.diff(xy[:, 0], prepend=position[0]), np.diff(xy[:, 1], prepend=position[1])
+            travelled = reference.progress_m + np.cumsum(np.hypot(dx, dy))
             lo, hi = np.minimum(lo, travelled), np.maximum(hi, travelled)
         widen = self._widen_m + 0.5 * step_m
         segments = slots[slots[:, -1] > 0, :4]
         if self._slot_pieces[0] is not slots:  # `_keep_slots` hands on the same array
-            keys = frozenset(tuple(row) for row in segments.tolist())
-            if keys != self._slot_pieces[1]:  # other segments, not only another order
-                self._slot_pieces = slots, keys, self._piece_distances(segments)
-            else:  # forced_slack takes the least distance: the order does not matter
-                self._slot_pieces = slots, keys, self._slot_pieces[2]
+            self._slot_pieces = slots, self._piece_distances(segments)
         return forced_slack(self._path, lo - widen, hi + widen, segments,
                             c.hull_radius_m + c.separation_m, c.slack_min_m,
-                            pieces=self._slot_pieces[2])
+                            pieces=self._slot_pieces[1])
 
     def _piece_distances(self, segments: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The path's pieces and the segments' distances to them (`slack_reference`), each
@@ -576,9 +569,8 @@ class NmpcController:
         cache = self._piece_distance_cache
         new = [k for k in keys if k not in cache]
         if new:
-            if len(cache) + len(new) > 4096:  # a long run through changing scans: afresh
+            if len(cache) > 4096:  # a long run through changing scans: start afresh
                 cache.clear()
-                new = list(dict.fromkeys(keys))
             for k, row in zip(new, piece_distances(self._path, self._pieces, np.array(new))):
                 cache[k] = row
         return self._pieces, np.array([cache[k] for k in keys])

@@ -387,24 +387,3 @@ def test_the_split_step_keeps_the_unsplit_answer_when_the_first_move_meets_its_r
         at_limit += abs(b.rates[0]) >= CFG.dnT_max - 1e-6
         x, act = b.states[1, :6] * 0.1 + b.states[0, :6] * 0.9, b.command
     assert at_limit >= 5  # the case this test is about: dnT_0 on its bound
-
-
-def test_a_full_cache_of_segment_distances_starts_afresh_without_losing_the_step():
-    """The distances of segments to the path's pieces are kept per segment, up to 4096 of
-    them (a long run through changing scans); a step that finds the cache full clears it
-    and still has every distance it needs."""
-    canal = straight_canal(width_m=20.0)
-    ctl = NmpcController(CFG)
-    first = ctl.step(X0, ACT0, canal.segments(), canal.waypoints, 2.0)
-    cache = ctl._piece_distance_cache
-    assert cache and all(tuple(s) in cache for s in first_slots(ctl))
-    cache.update({(float(i), 0.0, 0.0, 1.0): np.zeros(1) for i in range(4100)})
-    moved = canal.segments()
-    moved[:, 0] += np.where(np.arange(len(moved)) % 2 == 0, 0.01, 0.0)  # half of them new
-    again = ctl.step(X0, ACT0, moved, canal.waypoints, 2.0)
-    assert again.stats.ok and len(cache) < 4096
-
-
-def first_slots(ctl):
-    slots = ctl._slots_prev
-    return slots[slots[:, -1] > 0, :4].tolist()
