@@ -408,7 +408,6 @@ class NmpcController:
         self._progress_m = 0.0
         self._pieces: np.ndarray | None = None  # the path's, for the slack reference
         self._piece_distance_cache: dict[tuple, np.ndarray] = {}  # a segment's to them
-        self._slot_pieces: tuple = (None, None)  # (slots, their distances to the pieces)
 
     def _solve(self, w, p, w_ref, lbw, ubw) -> SqpResult:
         if self.method == "ipopt":
@@ -552,11 +551,9 @@ class NmpcController:
             lo, hi = np.minimum(lo, travelled), np.maximum(hi, travelled)
         widen = self._widen_m + 0.5 * step_m
         segments = slots[slots[:, -1] > 0, :4]
-        if self._slot_pieces[0] is not slots:  # `_keep_slots` hands on the same array
-            self._slot_pieces = slots, self._piece_distances(segments)
         return forced_slack(self._path, lo - widen, hi + widen, segments,
                             c.hull_radius_m + c.separation_m, c.slack_min_m,
-                            pieces=self._slot_pieces[1])
+                            pieces=self._piece_distances(segments))
 
     def _piece_distances(self, segments: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The path's pieces and the segments' distances to them (`slack_reference`), each
