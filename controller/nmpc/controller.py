@@ -25,7 +25,7 @@ from .rti import QpOptions, QpStep, SqpResult, sqp
 from .passage import WayAhead
 from .seamanship import Shaping, assess
 from .segment_slots import SLOT_FIELDS, check_segments, select_checked
-from .slack_reference import forced_slack, path_pieces, piece_distances
+from .slack_reference import forced_slack
 from .vessel_slots import predict_vessels
 
 METHODS = ("rti", "sqp", "ipopt")
@@ -391,7 +391,7 @@ class NmpcController:
         c = self.config
         lookahead = c.segment_range_m + c.stop_short_m
         return self._way.update(self._path, s, d, float(x[3]), segments, blind, elapsed_s,
-                                lookahead, lambda: self._piece_distances(segments))
+                                lookahead)
 
     def _set_path(self, waypoints) -> None:
         """A new waypoint list restarts the progress along the path; the same one keeps it."""
@@ -406,8 +406,6 @@ class NmpcController:
         self._path = waypoint_path(waypoints)
         self._waypoints_given = given
         self._progress_m = 0.0
-        self._pieces: np.ndarray | None = None  # the path's, for the slack reference
-        self._piece_distance_cache: dict[tuple, np.ndarray] = {}  # a segment's to them
 
     def _solve(self, w, p, w_ref, lbw, ubw) -> SqpResult:
         if self.method == "ipopt":
@@ -552,25 +550,7 @@ class NmpcController:
         widen = self._widen_m + 0.5 * step_m
         segments = slots[slots[:, -1] > 0, :4]
         return forced_slack(self._path, lo - widen, hi + widen, segments,
-                            c.hull_radius_m + c.separation_m, c.slack_min_m,
-                            pieces=self._piece_distances(segments))
-
-    def _piece_distances(self, segments: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The path's pieces and the segments' distances to them (`slack_reference`), each
-        segment's computed once per path: the slack reference's cheap test for open water."""
-        if self._pieces is None:
-            self._pieces = path_pieces(self._path)
-        keys = [tuple(row) for row in segments.tolist()]
-        if not keys:
-            return self._pieces, np.zeros((0, len(self._pieces) - 1))
-        cache = self._piece_distance_cache
-        new = [k for k in keys if k not in cache]
-        if new:
-            if len(cache) > 4096:  # a long run through changing scans: start afresh
-                cache.clear()
-            for k, row in zip(new, piece_distances(self._path, self._pieces, np.array(new))):
-                cache[k] = row
-        return self._pieces, np.array([cache[k] for k in keys])
+                            c.hull_radius_m + c.separation_m, c.slack_min_m)
 
     def _safe_guess(self, x_init: np.ndarray, reference: Reference,
                     slack_ref: np.ndarray | None = None) -> np.ndarray:

@@ -50,27 +50,14 @@ def waiting_kind(reason: str) -> str:
 
 def blocked_at(path: WaypointPath, progress_m: float, offset_m: float, segments,
                min_passage_m: float, lookahead_m: float, lateral_m: float = 30.0,
-               slab_m: float = 1.0, spacing_m: float = 0.5,
-               pieces: tuple[np.ndarray, np.ndarray] | None = None) -> float | None:
+               slab_m: float = 1.0, spacing_m: float = 0.5) -> float | None:
     """Arc length of the first slab ahead of `progress_m` (within `lookahead_m`) where the
     segments leave no passage at least `min_passage_m` wide that connects back to the boat
-    (at `offset_m` across the path), or None when the way is open. `pieces`: the path's
-    pieces and the segments' distances to them (`slack_reference.piece_distances`), if the
-    caller keeps them: with the boat within half a passage of the path and every segment a
-    passage away from the path ahead, the way along the path itself is open, without the
-    sweep."""
+    (at `offset_m` across the path), or None when the way is open."""
     segs = np.asarray(segments, float).reshape(-1, 4)
     s_end = min(progress_m + lookahead_m, path.length)
     if not len(segs) or s_end <= progress_m:
         return None
-    if pieces is not None and abs(offset_m) <= 0.5 * min_passage_m:
-        # every sample is then at least a passage from the path (1e-6 m for rounding): each
-        # slab has a gap of twice that around it, and the boat's half passage overlaps it
-        cuts, distance = pieces
-        ends = np.minimum(np.maximum([progress_m - slab_m, s_end + slab_m], 0.0), cuts[-1])
-        first, last = np.minimum(np.searchsorted(cuts, ends, side="right") - 1, len(cuts) - 2)
-        if distance[:, first:last + 1].min() >= min_passage_m + 1e-6:
-            return None
     # Only the parts near the way ahead: within reach of the path points from here to s_end.
     centre, _ = path.at(0.5 * (progress_m + s_end))
     a, b, length = _inside_circle(segs, centre[0], 0.5 * (s_end - progress_m) + lateral_m)
@@ -167,10 +154,8 @@ class WayAhead:
         self._since_sweep = None  # s since the last sweep (None: sweep now)
 
     def update(self, path: WaypointPath, progress_m: float, offset_m: float, speed_mps: float,
-               segments, blind: bool, period_s: float, lookahead_m: float,
-               pieces=None) -> Stop | None:
-        """The stop to make this period, or None to go on. `pieces`: `pieces`() -> those of
-        `blocked_at`, asked for only when a sweep is due."""
+               segments, blind: bool, period_s: float, lookahead_m: float) -> Stop | None:
+        """The stop to make this period, or None to go on."""
         if blind:
             if self._blind_stop_m is None:  # brake from where the boat went blind
                 self._blind_stop_m = progress_m + max(speed_mps, 0.0) ** 2 / (2 * self.decel_mps2)
@@ -182,8 +167,7 @@ class WayAhead:
             if self._since_sweep < self.sweep_every_s - 1e-9:
                 return self._stop  # as at the last sweep (1 m at 2 m/s)
         elapsed, self._since_sweep = self._since_sweep or 0.0, 0.0
-        at = blocked_at(path, progress_m, offset_m, segments, self.min_passage_m, lookahead_m,
-                        pieces=None if pieces is None else pieces())
+        at = blocked_at(path, progress_m, offset_m, segments, self.min_passage_m, lookahead_m)
         if at is not None:
             self._clear_s = 0.0
             self._stop = Stop(at - self.stop_short_m, f"way blocked at {at - progress_m:.0f} m", at)

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry import point_segment_distance, segments_cross, segments_to_endpoints
 from .reference import WaypointPath
 
 _ABEAM_COS = 0.5  # a segment's nearest point counts as a side wall within 60 deg of the normal
@@ -172,33 +171,10 @@ def forced_slack_at(points: np.ndarray, headings: np.ndarray, segments: np.ndarr
     return out
 
 
-def path_pieces(path: WaypointPath, piece_m: float = 5.0) -> np.ndarray:
-    """Arc lengths (P + 1,) that cut the path into straight pieces at most `piece_m` long
-    (at every waypoint, and every `piece_m` along the path)."""
-    cuts = np.concatenate([path.cumulative, np.arange(0.0, path.length, piece_m)])
-    return np.unique(cuts)
-
-
-def piece_distances(path: WaypointPath, pieces: np.ndarray, segments: np.ndarray) -> np.ndarray:
-    """Distance (M, P) from each of the segments (M, 4) to each piece of the path
-    (`path_pieces`): no point of that piece is closer (what lets `forced_slack` skip a
-    stretch far from every wall). Fixed for a path and a segment, so a caller can keep it."""
-    a, b = segments_to_endpoints(segments)
-    p, _ = path.at(pieces[:-1])
-    q, _ = path.at(pieces[1:])
-    ends = np.minimum(point_segment_distance(a, p, q), point_segment_distance(b, p, q))
-    sides = np.minimum(point_segment_distance(p, a, b), point_segment_distance(q, a, b)).T
-    return np.where(segments_cross(a, b, p, q), 0.0, np.minimum(ends, sides))
-
-
 def forced_slack(path: WaypointPath, lo_m: np.ndarray, hi_m: np.ndarray, segments: np.ndarray,
-                 margin_m: float, slack_min_m: float, spacing_m: float = 1.0,
-                 pieces: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+                 margin_m: float, slack_min_m: float, spacing_m: float = 1.0) -> np.ndarray:
     """Per stage, the most negative forced slack (`forced_slack_at`) over the path's arc
-    lengths [lo_m, hi_m] (one interval a stage), sampled every `spacing_m`. `pieces`: the
-    path's pieces and the segments' distances to them (`path_pieces`, `piece_distances`), if
-    the caller keeps them: where every piece the samples lie on is 1.25 margin_m from every
-    segment, no sample needs slack (`forced_slack_at`) and none is computed."""
+    lengths [lo_m, hi_m] (one interval a stage), sampled every `spacing_m`."""
     lo = np.minimum(np.maximum(np.asarray(lo_m, float), 0.0), path.length)
     hi = np.minimum(np.maximum(np.asarray(hi_m, float), lo), path.length)
     out = np.zeros(len(lo))
@@ -206,16 +182,7 @@ def forced_slack(path: WaypointPath, lo_m: np.ndarray, hi_m: np.ndarray, segment
         return out
     start = float(lo.min())
     count = int((float(hi.max()) - start) / spacing_m + 1.999999)
-    arcs = start + spacing_m * np.arange(count)
-    if pieces is not None:
-        # the pieces of the first and the last sample (path.at clamps them to the path), and
-        # every piece between; 1e-6 m beyond the bound for the samples' rounding
-        cuts, distance = pieces
-        ends = np.minimum(np.maximum(arcs[[0, -1]], 0.0), cuts[-1])
-        first, last = np.minimum(np.searchsorted(cuts, ends, side="right") - 1, len(cuts) - 2)
-        if distance[:, first:last + 1].min() >= 1.25 * margin_m + 1e-6:
-            return out
-    points, headings = path.at(arcs)
+    points, headings = path.at(start + spacing_m * np.arange(count))
     forced = forced_slack_at(points, headings, segments, margin_m, slack_min_m)
     if not forced.any():
         return out

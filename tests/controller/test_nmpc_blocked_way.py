@@ -70,44 +70,6 @@ def test_a_bend_is_not_a_blockage():
         assert blocked_at(path, s, 0.0, segs, 6.0, 57.5) is None, s
 
 
-def test_the_open_water_shortcut_gives_the_sweeps_answer(monkeypatch):
-    """With the segments' distances to the path's pieces, a way a passage clear of every
-    segment is open without the sweep; the answer is the sweep's, blocked or not."""
-    from controller.nmpc.reference import WaypointPath
-    from controller.nmpc.slack_reference import path_pieces, piece_distances
-
-    sweeps = []
-    frame = WaypointPath.frame
-    monkeypatch.setattr(WaypointPath, "frame", lambda *a, **k: sweeps.append(1) or frame(*a, **k))
-    rng = np.random.default_rng(3)
-    cases = []
-    canal = bend_canal()
-    bend = waypoint_path(canal.waypoints)
-    for s in np.arange(0.0, bend.length - 20.0, 7.0):
-        xy, _ = bend.at(s)
-        for offset in (-4.0, -1.0, 0.0, 2.5):
-            cases.append((bend, s, offset, visible_segments(canal.segments(), xy[0])))
-    for width in (10.0, 16.0, 24.0):
-        walls = straight_canal(width_m=width).segments()
-        path = waypoint_path(straight_canal(width_m=width).waypoints)
-        for _ in range(12):
-            x, y0 = rng.uniform(20.0, 120.0), rng.uniform(-width / 2, width / 2)
-            obstacle = across(x, y0, y0 + rng.uniform(-width, width))
-            cases.append((path, rng.uniform(0.0, 80.0), rng.uniform(-3.0, 3.0),
-                          np.vstack([walls, [obstacle]])))
-        cases.append((path, 50.0, 0.0, walls))
-    answers, shortcuts = set(), 0
-    for path, progress, offset, segs in cases:
-        cuts = path_pieces(path)
-        pieces = (cuts, piece_distances(path, cuts, segs))
-        swept = blocked_at(path, progress, offset, segs, 6.0, 60.0)
-        before = len(sweeps)
-        assert blocked_at(path, progress, offset, segs, 6.0, 60.0, pieces=pieces) == swept
-        shortcuts += len(sweeps) == before
-        answers.add(swept is None)
-    assert answers == {True, False} and 10 <= shortcuts < len(cases)
-
-
 def test_the_stopping_reference_comes_to_rest_at_the_stop_and_holds_past_it():
     r = reference_trajectory(PATH, [10.0, 0.0], 0.0, 2.0, 25, 1.0, stop_at_m=40.0,
                              decel_mps2=0.1)
