@@ -107,7 +107,8 @@ def _summary(run, label: str) -> dict:
 
 def _vessel_cases(config, qp, canal, x0, act0, args) -> dict:
     """RTI on the same canal without vessel slots, with them and no vessel, and with them
-    and two vessels (one coming down the first leg, one crossing it), in one session."""
+    and two vessels (one coming down the first leg, one crossing it), in one session; the
+    one-phase step (`split=False`), so that each case's time is its whole step."""
     from dataclasses import replace
 
     from controller.nmpc.bench import BenchVessel, closed_loop
@@ -121,7 +122,7 @@ def _vessel_cases(config, qp, canal, x0, act0, args) -> dict:
     out = {}
     for name, (cfg, vs) in cases.items():
         print(f"bench nmpc: RTI, {name.replace('_', ' ')} ...", file=sys.stderr, flush=True)
-        controller = NmpcController(cfg, method="rti", qp=qp)
+        controller = NmpcController(cfg, method="rti", qp=qp, split=False)  # the whole step
         run = closed_loop(controller, canal, x0, act0, args.vessel_steps, args.speed,
                           vessels=vs)
         s = _summary(run, "rti")
@@ -258,7 +259,7 @@ def run(args) -> int:
                        **options}
         for name, options_ in options.items():
             print(f"bench nmpc: RTI with {name} ...", file=sys.stderr, flush=True)
-            controller = NmpcController(config, method="rti", qp=options_)
+            controller = NmpcController(config, method="rti", qp=options_, split=False)
             run_ = closed_loop(controller, canal, x0, act0, args.qp_compare_steps, args.speed)
             s = _summary(run_, "rti")
             compare[name] = {k: s[k] for k in ("feedback_latency_ms", "preparation_ms",

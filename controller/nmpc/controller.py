@@ -12,19 +12,19 @@ the caller must stop the boat.
 
 from __future__ import annotations
 
+import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import InputError, SolverError, finite_number
-from ..geometry import unwrap_near
 from .problem import NU, NX, NX_BOAT, NmpcConfig, ParamLayout, build_ocp, pack_params
 from .reference import Reference, WaypointPath, reference_trajectory, waypoint_path
 from .rti import QpOptions, QpStep, SqpResult, sqp
 from .passage import WayAhead
 from .seamanship import Shaping, assess
-from .segment_slots import SLOT_FIELDS, check_segments, select_segments
+from .segment_slots import SLOT_FIELDS, check_segments, select_checked
 from .slack_reference import forced_slack
 from .vessel_slots import predict_vessels
 
@@ -97,6 +97,9 @@ def steady_throttle(speed_mps, boat) -> np.ndarray:
 
 
 def _finite_vector(value, size: int, what: str) -> np.ndarray:
+    if type(value) is np.ndarray and value.shape == (size,) and value.dtype == np.float64:
+        if np.isfinite(value).all():  # the common case, in a fifth of the time
+            return value  # as np.asarray would: the same array
     try:
         arr = np.asarray(value, float)
     except (TypeError, ValueError):
@@ -110,6 +113,11 @@ def _finite_vector(value, size: int, what: str) -> np.ndarray:
     return arr
 
 
+def _unwrap_near(angle: float, reference: float) -> float:
+    """`geometry.unwrap_near` for two floats, without numpy's overhead."""
+    return reference + ((angle - reference + math.pi) % (2.0 * math.pi) - math.pi)
+
+
 def top_speed_mps(boat, throttle_pct: float = 100.0) -> float:
     """Steady surge speed at `throttle_pct` in still water (c_eff nT^2 = drag)."""
     a, b, f = -boat.Xuu, -boat.Xu, boat.c_eff * float(throttle_pct)**2
@@ -119,15 +127,15 @@ def top_speed_mps(boat, throttle_pct: float = 100.0) -> float:
 class NmpcController:
     """The paper's NMPC, solved by real-time iteration ("rti"), SQP to convergence ("sqp")
     or IPOPT ("ipopt"). `compiled` uses the cached C linearisation (RTI, SQP). `split`: RTI
-    in two phases (`prepare` after each command, `feedback` when the state comes); off by
-    default while one case is open: when the way ahead opens (a blocking segment vanishes),
-    the prepared QP failed once where the one-phase step does not (the safe-guess retry
-    caught it; tests/controller/test_nmpc_blocked_way.py with split=True shows it)."""
+    in two phases (`prepare` after each command, `feedback` when the state comes), on by
+    default: the answer is the one-phase step's (bit for bit on the bench and in
+    tests/controller/test_nmpc_blocked_way.py, where the way ahead opens), the command
+    leaves after the feedback alone; `split=False` does the whole step in `feedback`."""
 
     def __init__(self, config: NmpcConfig = NmpcConfig(), method: str = "rti",
                  qp: QpOptions = QpOptions(), compiled: bool = True, sqp_max_iter: int = 50,
                  sqp_tol: float = 1e-3, max_failures: int = 3,
-                 reference_search_ahead_m: float = 50.0, split: bool = False):
+                 reference_search_ahead_m: float = 50.0, split: bool = True):
         if method not in METHODS:
             raise InputError(f"NMPC method {method!r}: choose one of {', '.join(METHODS)}")
         if max_failures < 1:
@@ -163,6 +171,18 @@ class NmpcController:
                 linearisation = self.compiled_info.function
                 compile = lambda f: compile_cached(f).function  # noqa: E731
             self._qp = QpStep(self.ocp, linearisation, qp, compile)
+        self._act_lo = np.array([-config.nT_max, -config.nS_max])
+        self._act_hi = -self._act_lo
+        self._rate_max = np.array([config.dnT_max, config.dnS_max])
+        self._x0_boat = self._x0_at[:NX_BOAT]
+        self._x1_xy_at = self.ocp.states_at[1:, :2]
+        self._xy_buffer = np.zeros((config.horizon + 1, 2))
+        self._u0_rates = self.ocp.inputs_at[0, :2]
+        self._states_boat_at = self.ocp.states_at[:, :NX_BOAT]
+        self._inputs_rates_at = self.ocp.inputs_at[:, :2]
+        self._stages = np.arange(1, config.horizon + 1, dtype=float)
+        self._widen_m = max(abs(o) for o in config.hull_offsets_m)
+        self._shift_cache: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._p = self._params.copy()
         self._w_ref = np.zeros(self.ocp.nw)
         self._lbw_step, self._ubw_step = self._lbw.copy(), self._ubw.copy()
@@ -181,6 +201,7 @@ class NmpcController:
         self._rules_clear_s = 0.0
         self._prepared: tuple[float, np.ndarray] | None = None  # (elapsed_s, guess)
         self._slots_prev: np.ndarray | None = None
+        self._slot_at: dict[tuple, int] = {}  # a segment (x_c, y_c, theta, length) -> its slot
         self._preparation_s = 0.0
 
     # -- the step ---------------------------------------------------------------------------
@@ -189,15 +210,12 @@ class NmpcController:
              blind: bool = False, bias=(0.0, 0.0, 0.0), vessels=()) -> NmpcStep:
         """One control period: `feedback` for this state, then `prepare` for the next (with
         `split`; the stats count both). Arguments as `feedback`."""
-        out = self.feedback(state, actuators, segments, waypoints, target_speed_mps, current,
-                            elapsed_s, blind, bias, vessels)
         if not self.split:
-            return out
-        preparation = self.prepare()
-        st = out.stats
-        stats = replace(st, time_preparation_s=preparation,
-                        time_total_s=st.time_feedback_s + preparation)
-        return replace(out, stats=stats)
+            return self.feedback(state, actuators, segments, waypoints, target_speed_mps,
+                                 current, elapsed_s, blind, bias, vessels)
+        done = self._feedback(state, actuators, segments, waypoints, target_speed_mps,
+                              current, elapsed_s, blind, bias, vessels)
+        return self._output(*done, self.prepare())
 
     def prepare(self, elapsed_s: float | None = None) -> float:
         """The preparation phase of the real-time iteration, right after a command is sent:
@@ -242,11 +260,20 @@ class NmpcController:
         Where the segments leave no passage along the route, or when blind, the reference
         slows the boat to a stop short of it and holds (`passage`); `stats.waiting` says why.
         """
+        done = self._feedback(state, actuators, segments, waypoints, target_speed_mps,
+                              current, elapsed_s, blind, bias, vessels)
+        preparation, self._preparation_s = self._preparation_s if done[-1] else 0.0, 0.0
+        return self._output(*done, preparation)
+
+    def _feedback(self, state, actuators, segments, waypoints, target_speed_mps: float,
+                  current, elapsed_s, blind, bias, vessels) -> tuple:
+        """The feedback up to the command; returns what `_output` needs (ends with whether the
+        step used a preparation)."""
         t0 = time.perf_counter(), time.thread_time()
         c = self.config
         x = _finite_vector(state, 6, "state [x, y, psi, u, v, r]")
         act = _finite_vector(actuators, 2, "actuators [nT, nS]")
-        act = np.clip(act, [-c.nT_max, -c.nS_max], [c.nT_max, c.nS_max])
+        act = np.minimum(np.maximum(act, self._act_lo), self._act_hi)
         current = _finite_vector(current, 2, "current [north, east]")
         bias = _finite_vector(bias, 3, "bias [b_u, b_v, b_r]")
         self._set_path(waypoints)
@@ -263,7 +290,7 @@ class NmpcController:
         else:
             prepared, guess = None, self._shifted_plan(elapsed)
         if guess is not None:
-            x[2] = float(unwrap_near(x[2], guess[self.ocp.state_index(0)][2]))
+            x[2] = _unwrap_near(float(x[2]), float(guess[self._x0_at[2]]))
         segs = check_segments(segments)
         vessels = tuple(v for v in vessels if getattr(v, "moving", True))
         s, d = self._path.frame(x[None, :2], self._progress_m,
@@ -278,8 +305,7 @@ class NmpcController:
                                          c.step_s, self._progress_m, self.search_ahead_m,
                                          stop_at, c.stop_decel_mps2, current, rules.offset_m)
         planned = reference.states[:, :2] if guess is None else guess[self._xy_at]
-        selection = select_segments(segs, x[:2], c.segment_slots, c.segment_range_m,
-                                    planned)
+        selection = select_checked(segs, x[:2], c.segment_slots, c.segment_range_m, planned)
         slots = self._keep_slots(selection.slots)
         vessel_sel = predict_vessels(vessels, c.vessel_slots, c.horizon, c.step_s, planned,
                                      x[:2])
@@ -291,7 +317,7 @@ class NmpcController:
         p[lay.segments] = slots.reshape(-1)
         x_init = np.concatenate([x, act])
         lbw, ubw = self._lbw_step, self._ubw_step
-        lbw[self._x0_at[:NX_BOAT]] = ubw[self._x0_at[:NX_BOAT]] = x_init
+        lbw[self._x0_boat] = ubw[self._x0_boat] = x_init
         slack_ref = self._slack_reference(reference, speed, guess, x[:2], slots)
         w_ref = self._w_ref
         w_ref[self._ref_at] = reference.states
@@ -330,9 +356,10 @@ class NmpcController:
                 fallback, plan = "shifted_plan", self._start_at(guess, x_init)
         self._plan = plan
         self._progress_m = reference.progress_m
-        preparation, self._preparation_s = (self._preparation_s if prepared else 0.0), 0.0
-        return self._output(plan, act, reference, result, fallback, t0, selection, stop,
-                            vessel_sel, rules, fed_back, preparation)
+        command = self._command(plan, act)  # what leaves now: the feedback ends here
+        times = time.perf_counter() - t0[0], time.thread_time() - t0[1]
+        return (plan, command, reference, result, fallback, times, selection, stop,
+                vessel_sel, rules, fed_back, prepared is not None)
 
     # -- pieces -----------------------------------------------------------------------------
     def _rules(self, s: float, d: float, vessels, segments, speed_mps: float,
@@ -395,25 +422,40 @@ class NmpcController:
     def _keep_slots(self, slots: np.ndarray) -> np.ndarray:
         """The selected segments with each one still selected in the slot it had last step:
         the order of the slots does not change the OCP, and a set of slots unchanged from
-        the prepared step lets the feedback keep the prepared constraints."""
+        the prepared step lets the feedback keep the prepared constraints. (Rows matched
+        through a dict of last step's: 16 lookups cost less than the 16 x 16 comparison.)"""
         prev = self._slots_prev
-        self._slots_prev = slots
-        if prev is None:
-            return slots
-        active, was = slots[:, -1] > 0, prev[:, -1] > 0
-        same = (slots[:, None, :4] == prev[None, :, :4]).all(axis=2)
-        same &= active[:, None] & was[None, :]
-        matched = same.any(axis=1)
-        old_at = same.argmax(axis=1)[matched]
-        if not matched.any() or np.bincount(old_at).max() > 1:  # none kept, or a duplicate
+        if prev is not None and (slots == prev).all():
+            return prev  # the same segments in the same slots (a static map, a still scene)
+        out = slots
+        if prev is not None:
+            out = self._matched_slots(slots)
+        self._slots_prev = out
+        self._slot_at = {}
+        for j, row in enumerate(out.tolist()):  # where each active segment sits now
+            if row[4] > 0:
+                self._slot_at.setdefault(tuple(row[:4]), j)
+        return out
+
+    def _matched_slots(self, slots: np.ndarray) -> np.ndarray:
+        """`slots` reordered so that each segment of last step's slots keeps its slot, the
+        new ones in the free slots in order; unchanged when none is kept or two match one."""
+        old_at, matched, rest = [], [], []
+        for i, row in enumerate(slots.tolist()):
+            if row[4] > 0:
+                j = self._slot_at.get(tuple(row[:4]))
+                if j is None:
+                    rest.append(i)
+                else:
+                    old_at.append(j)
+                    matched.append(i)
+        if not old_at or len(set(old_at)) < len(old_at):  # none kept, or a duplicate
             return slots
         out = np.zeros_like(slots)
         out[old_at] = slots[matched]
-        taken = np.zeros(len(slots), bool)
-        taken[old_at] = True
-        rest = np.flatnonzero(active & ~matched)
-        out[np.flatnonzero(~taken)[: len(rest)]] = slots[rest]
-        self._slots_prev = out
+        taken = set(old_at)
+        free = [j for j in range(len(slots)) if j not in taken]
+        out[free[: len(rest)]] = slots[rest]
         return out
 
     def _feed_back(self, w, p, w_ref, lbw, ubw) -> SqpResult:
@@ -425,7 +467,7 @@ class NmpcController:
                              max(r.qp_iterations, 0), np.inf, r.time_linearisation_s,
                              r.time_qp_s)
         new = w + r.dw
-        norm = float(np.max(np.abs(r.dw)))
+        norm = float(np.abs(r.dw).max())
         result = SqpResult(new, True, norm < self.sqp_tol, r.status, 1, max(r.qp_iterations, 0),
                            norm, r.time_linearisation_s, r.time_qp_s)
         if not self._plausible(new, lbw, ubw):
@@ -453,16 +495,31 @@ class NmpcController:
         stages, extrapolated past the last one)."""
         if self._plan is None:
             return None
+        at = self._shift_cache.get(elapsed_s)
+        if at is None:
+            if len(self._shift_cache) > 8:  # elapsed times measured by a caller: keep a few
+                self._shift_cache.clear()
+            at = self._shift_cache[elapsed_s] = self._shift_indices(elapsed_s)
+        lo, hi, f = at
+        w = self._plan
+        a = w[lo]
+        return a + f * (w[hi] - a)
+
+    def _shift_indices(self, elapsed_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Where in w each entry of the shifted plan interpolates from (lo, hi) and how far
+        (f): states between stages i and i + 1 at i + elapsed / Ts (extrapolated past the
+        last), inputs the same but clamped to their last interval."""
         N, Ts = self.config.horizon, self.config.step_s
-        states, inputs = self.ocp.unpack(self._plan)
+        S, U = self.ocp.states_at, self.ocp.inputs_at
         pos = np.arange(N + 1) + elapsed_s / Ts
         i = np.minimum(pos.astype(int), N - 1)
-        f = (pos - i)[:, None]
-        shifted_states = states[i] + f * (states[i + 1] - states[i])
+        f = np.broadcast_to((pos - i)[:, None], S.shape)
         j = np.minimum(pos[:N].astype(int), N - 2)
-        g = np.clip(pos[:N] - j, 0.0, 1.0)[:, None]
-        shifted_inputs = inputs[j] + g * (inputs[j + 1] - inputs[j])
-        return self.ocp.pack(shifted_states, shifted_inputs)
+        g = np.broadcast_to(np.clip(pos[:N] - j, 0.0, 1.0)[:, None], U.shape)
+        lo, hi, weight = np.empty(self.ocp.nw, int), np.empty(self.ocp.nw, int), np.empty(self.ocp.nw)
+        lo[S], hi[S], weight[S] = S[i], S[i + 1], f
+        lo[U], hi[U], weight[U] = U[j], U[j + 1], g
+        return lo, hi, weight
 
     def _hold(self, guess: np.ndarray, x_init: np.ndarray) -> np.ndarray:
         """An unsolved guess with the actuators held where they are (all rates 0): what a
@@ -474,7 +531,8 @@ class NmpcController:
 
     def _start_at(self, w: np.ndarray, x_init: np.ndarray) -> np.ndarray:
         w = w.copy()
-        w[self.ocp.state_index(0)] = np.concatenate([x_init, [0.0]])
+        w[:NX_BOAT] = x_init  # x_0 leads w (hpipm's stage order), its slack 0
+        w[NX_BOAT] = 0.0
         return w
 
     def _slack_reference(self, reference: Reference, speed_mps: float, guess, position,
@@ -483,14 +541,16 @@ class NmpcController:
         (`slack_reference`), over the path between the stage's reference point and its place in
         the warm start, widened by the hull circles' offsets and half a stage's travel."""
         c = self.config
-        N, Ts = c.horizon, c.step_s
-        arcs = reference.progress_m + speed_mps * Ts * np.arange(1, N + 1)
-        lo, hi = arcs.copy(), arcs.copy()
+        step_m = speed_mps * c.step_s
+        lo = hi = reference.progress_m + step_m * self._stages
         if guess is not None:
-            xy = np.vstack([position, guess[self.ocp.states_at[1:, :2]]])
-            travelled = reference.progress_m + np.cumsum(np.hypot(*np.diff(xy, axis=0).T))
+            xy = self._xy_buffer  # the boat, then stages 1..Np of the warm start
+            xy[0] = position
+            xy[1:] = guess[self._x1_xy_at]
+            d = xy[1:] - xy[:-1]  # (np.diff with prepend costs ten times as much)
+            travelled = reference.progress_m + np.cumsum(np.hypot(d[:, 0], d[:, 1]))
             lo, hi = np.minimum(lo, travelled), np.maximum(hi, travelled)
-        widen = max(abs(o) for o in c.hull_offsets_m) + 0.5 * speed_mps * Ts
+        widen = self._widen_m + 0.5 * step_m
         segments = slots[slots[:, -1] > 0, :4]
         return forced_slack(self._path, lo - widen, hi + widen, segments,
                             c.hull_radius_m + c.separation_m, c.slack_min_m)
@@ -522,33 +582,36 @@ class NmpcController:
         inputs[:, 2] = states[1:, NX - 1]
         return self.ocp.pack(states, inputs)
 
-    def _output(self, plan, act, reference, result: SqpResult, fallback: str,
-                t0: tuple[float, float], selection, stop=None, vessel_sel=None,
-                rules=None, fed_back: bool = False, preparation_s: float = 0.0) -> NmpcStep:
+    def _command(self, plan: np.ndarray, act: np.ndarray) -> tuple:
+        """The plan's first move as a command: (command, rates, clipped)."""
         c = self.config
-        states, inputs = self.ocp.unpack(plan)
-        rate_max = np.array([c.dnT_max, c.dnS_max])
-        rates = np.clip(inputs[0, :2], -rate_max, rate_max)
+        rates_planned = plan[self._u0_rates]
+        rates = np.minimum(np.maximum(rates_planned, -self._rate_max), self._rate_max)
         wanted = act + rates * c.control_period_s
-        command = np.clip(wanted, [-c.nT_max, -c.nS_max], [c.nT_max, c.nS_max])
-        clipped = bool(np.abs(rates - inputs[0, :2]).max() > 1e-6
+        command = np.minimum(np.maximum(wanted, self._act_lo), self._act_hi)
+        clipped = bool(np.abs(rates - rates_planned).max() > 1e-6
                        or np.abs(command - wanted).max() > 1e-6)
+        return command, rates, clipped
+
+    def _output(self, plan, command, reference, result: SqpResult, fallback: str,
+                times: tuple[float, float], selection, stop, vessel_sel, rules,
+                fed_back: bool, prepared: bool, preparation_s: float) -> NmpcStep:
+        """The step as the caller gets it: `times` are the feedback's (wall, CPU), the
+        preparation's seconds (the one before this feedback, or with `split` the one after)
+        count in the step's total."""
+        command, rates, clipped = command
         stats = SolverStats(
             method=self.method, ok=result.ok, converged=result.converged, status=result.status,
             fallback=fallback, sqp_iterations=result.sqp_iterations,
             qp_iterations=result.qp_iterations,
             consecutive_failures=self.consecutive_failures,
-            time_total_s=time.perf_counter() - t0[0], cpu_time_s=time.thread_time() - t0[1],
+            time_total_s=times[0] + preparation_s, cpu_time_s=times[1],
             time_linearisation_s=result.time_linearisation_s, time_qp_s=result.time_qp_s,
             segments_dropped=selection.dropped, dropped_nearest_m=selection.dropped_nearest_m,
             command_clipped=clipped, waiting="" if stop is None else stop.reason,
             blocked_at_m=None if stop is None else stop.blocked_at_m,
-            vessels=() if vessel_sel is None else vessel_sel.ids,
-            vessels_dropped=0 if vessel_sel is None else vessel_sel.dropped,
-            rules="" if rules is None else rules.reason, fed_back=fed_back)
-        feedback_s = time.perf_counter() - t0[0]
-        stats = replace(stats, time_feedback_s=feedback_s,
-                        time_total_s=feedback_s + preparation_s,
-                        time_preparation_s=preparation_s, cpu_time_s=time.thread_time() - t0[1])
-        return NmpcStep(command, rates, states[:, :NX_BOAT].copy(), inputs[:, :2].copy(),
-                        states[1:, NX - 1].copy(), reference, stats)
+            vessels=vessel_sel.ids, vessels_dropped=vessel_sel.dropped,
+            rules=rules.reason, fed_back=fed_back, time_feedback_s=times[0],
+            time_preparation_s=preparation_s)
+        return NmpcStep(command, rates, plan[self._states_boat_at], plan[self._inputs_rates_at],
+                        plan[self._slack_ref_at], reference, stats)

@@ -30,7 +30,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import clip_segments_to_circle, segments_to_endpoints
 from .reference import WaypointPath
 
 
@@ -59,16 +58,13 @@ def blocked_at(path: WaypointPath, progress_m: float, offset_m: float, segments,
     s_end = min(progress_m + lookahead_m, path.length)
     if not len(segs) or s_end <= progress_m:
         return None
-    a, b = segments_to_endpoints(segs)
     # Only the parts near the way ahead: within reach of the path points from here to s_end.
     centre, _ = path.at(0.5 * (progress_m + s_end))
-    half = 0.5 * (s_end - progress_m) + lateral_m
-    segs = clip_segments_to_circle(a, b, centre[0], half)
-    if not len(segs):
+    a, b, length = _inside_circle(segs, centre[0], 0.5 * (s_end - progress_m) + lateral_m)
+    if not len(a):
         return None
-    a, b = segments_to_endpoints(segs)
-    n = np.maximum(np.ceil(segs[:, 3] / spacing_m).astype(int), 1) + 1
-    which = np.repeat(np.arange(len(segs)), n)
+    n = np.maximum(np.ceil(length / spacing_m).astype(int), 1) + 1
+    which = np.repeat(np.arange(len(a)), n)
     frac = (np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n - 1, n)
     pts = a[which] + frac[:, None] * (b - a)[which]
     s, d = path.frame(pts, progress_m - slab_m, s_end + slab_m)
@@ -90,27 +86,53 @@ def blocked_at(path: WaypointPath, progress_m: float, offset_m: float, segments,
     wide = hi - lo >= min_passage_m
     k, lo, hi = k[wide], lo[wide], hi[wide]
     by_slab = np.lexsort((lo, k))
-    k, lo, hi = k[by_slab].tolist(), lo[by_slab].tolist(), hi[by_slab].tolist()
-    occupied = set(slab.tolist())
+    k, lo, hi = k[by_slab], lo[by_slab].tolist(), hi[by_slab].tolist()
+    first_gap = np.searchsorted(k, np.arange(n_slabs + 1)).tolist()  # slab j: [j], [j + 1]
+    occupied = np.zeros(n_slabs + 1, bool)
+    occupied[np.minimum(slab, n_slabs)] = True
+    occupied = occupied.tolist()
     # Two slabs' intervals connect when they share half a passage: a wall tilted against the
     # path moves its points a little from slab to slab, which must not connect the water
     # behind it, while a channel shifting sideways up to 3 m per slab still connects.
     overlap = 0.5 * min_passage_m
     reach = [(offset_m - overlap, offset_m + overlap)]  # the boat itself
-    i = 0
     for j in range(n_slabs):
-        if j not in occupied:
+        if not occupied[j]:
             reach = [(-lateral_m, lateral_m)]  # nothing in this slab: all of it is open
             continue
-        gaps = []
-        while i < len(k) and k[i] == j:
-            gaps.append((lo[i], hi[i]))
-            i += 1
-        reach = [g for g in gaps
-                 if any(min(g[1], r1) - max(g[0], r0) >= overlap for r0, r1 in reach)]
-        if not reach:
+        reached = []
+        for i in range(first_gap[j], first_gap[j + 1]):
+            g0, g1 = lo[i], hi[i]
+            for r0, r1 in reach:
+                if min(g1, r1) - max(g0, r0) >= overlap:
+                    reached.append((g0, g1))
+                    break
+        if not reached:
             return progress_m + j * slab_m
+        reach = reached
     return None
+
+
+def _inside_circle(segments: np.ndarray, centre: np.ndarray, radius_m: float):
+    """The parts of (M, 4) segments inside a circle: their endpoints (K, 2) twice and lengths
+    (K,) (`geometry.clip_segments_to_circle` without the round trip through (x_c, y_c,
+    theta, length), a sweep's largest cost after the path frame)."""
+    cos, sin = np.cos(segments[:, 2]), np.sin(segments[:, 2])
+    h = 0.5 * segments[:, 3]
+    ax, ay = segments[:, 0] - h * cos, segments[:, 1] - h * sin
+    dx, dy = 2.0 * h * cos, 2.0 * h * sin
+    fx, fy = ax - centre[0], ay - centre[1]
+    dd = dx * dx + dy * dy
+    bq = fx * dx + fy * dy
+    disc = bq * bq - dd * (fx * fx + fy * fy - radius_m**2)
+    root = np.sqrt(np.maximum(disc, 0.0))
+    safe = np.where(dd > 0, dd, 1.0)
+    t0 = np.minimum(np.maximum((-bq - root) / safe, 0.0), 1.0)
+    t1 = np.minimum(np.maximum((-bq + root) / safe, 0.0), 1.0)
+    keep = (disc > 0) & (t1 > t0)
+    a = np.column_stack([ax + t0 * dx, ay + t0 * dy])[keep]
+    b = np.column_stack([ax + t1 * dx, ay + t1 * dy])[keep]
+    return a, b, (t1 - t0)[keep] * np.sqrt(dd[keep])
 
 
 class WayAhead:

@@ -61,10 +61,11 @@ class WaypointPath:
         lo, hi = np.maximum(cum[:-1], s_min), np.minimum(cum[1:], s_max)
         legs = np.nonzero(lo <= hi)[0]
         p = np.asarray(point, float)[:2]
-        d = p - self.start[legs]
-        along = (d[:, 0] * self.delta[legs, 0] + d[:, 1] * self.delta[legs, 1]) / L[legs]
+        start, delta = self.start.take(legs, axis=0), self.delta.take(legs, axis=0)
+        d = p - start
+        along = (d[:, 0] * delta[:, 0] + d[:, 1] * delta[:, 1]) / L[legs]
         s = np.minimum(np.maximum(cum[legs] + along, lo[legs]), hi[legs])
-        xy = self.start[legs] + ((s - cum[legs]) / L[legs])[:, None] * self.delta[legs]
+        xy = start + ((s - cum[legs]) / L[legs])[:, None] * delta
         dist = np.hypot(xy[:, 0] - p[0], xy[:, 1] - p[1])
         i = int(np.argmin(dist))
         return float(s[i]), float(dist[i])
@@ -77,26 +78,33 @@ class WaypointPath:
         s_min = min(s_min, s_max)
         legs = np.nonzero((cum[:-1] <= s_max) & (cum[1:] >= s_min))[0]
         p = np.asarray(points, float).reshape(-1, 2)
-        d = p[:, None, :] - self.start[legs][None]  # (N, legs, 2)
-        dx, dy = self.delta[legs, 0], self.delta[legs, 1]
-        along = (d[..., 0] * dx + d[..., 1] * dy) / L[legs]
-        s = np.clip(cum[legs] + along, np.maximum(cum[legs], s_min), np.minimum(cum[legs + 1], s_max))
-        t = (s - cum[legs]) / L[legs]
-        rx = d[..., 0] - t * dx
-        ry = d[..., 1] - t * dy
+        start, dx, dy = self.start.take(legs, axis=0), self.delta[legs, 0], self.delta[legs, 1]
+        length, at = L[legs], cum[legs]
+        px = p[:, 0:1] - start[:, 0]  # (N, legs): no (N, legs, 2) temporary, no np.clip
+        py = p[:, 1:2] - start[:, 1]
+        along = (px * dx + py * dy) / length
+        s = np.minimum(np.maximum(at + along, np.maximum(at, s_min)),
+                       np.minimum(cum[legs + 1], s_max))
+        t = (s - at) / length
+        rx = px - t * dx
+        ry = py - t * dy
         best = np.argmin(rx * rx + ry * ry, axis=1)
         rows = np.arange(len(p))
-        side = (dx[best] * ry[rows, best] - dy[best] * rx[rows, best]) / L[legs][best]
-        offset = np.hypot(rx[rows, best], ry[rows, best])
+        rx, ry = rx[rows, best], ry[rows, best]
+        side = (dx[best] * ry - dy[best] * rx) / length[best]
+        offset = np.hypot(rx, ry)
         return s[rows, best], np.where(side >= 0.0, offset, -offset)
 
     def at(self, s) -> tuple[np.ndarray, np.ndarray]:
         """Points (n, 2) and leg headings (n,) at arc lengths s, clamped to the ends."""
-        s = np.minimum(np.maximum(np.atleast_1d(np.asarray(s, float)), 0.0), self.cumulative[-1])
-        i = np.minimum(np.searchsorted(self.cumulative, s, side="right") - 1,
-                       len(self.leg_length) - 1)
-        t = (s - self.cumulative[i]) / self.leg_length[i]
-        return self.start[i] + t[:, None] * self.delta[i], self.heading[i]
+        cum = self.cumulative
+        s = np.minimum(np.maximum(np.atleast_1d(np.asarray(s, float)), 0.0), cum[-1])
+        i = np.minimum(np.searchsorted(cum, s, side="right") - 1, len(self.leg_length) - 1)
+        t = (s - cum[i]) / self.leg_length[i]
+        # ndarray.take for the rows: a tenth of the time of start[i] on small arrays
+        xy = self.start.take(i, axis=0)
+        xy += t[:, None] * self.delta.take(i, axis=0)
+        return xy, self.heading[i]
 
 
 def waypoint_path(waypoints) -> WaypointPath:

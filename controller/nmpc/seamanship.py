@@ -66,16 +66,24 @@ def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed
     Rb, dp, dv = hull_radius_m, separation_m, vessel_separation_m
     speed_cap, stop, reasons, encounters = None, None, [], []
     meet_offset, pass_offsets = 0.0, []
-    xy0, heading0 = path.at(progress_m)
-    port0, stbd0 = _room(xy0, heading0, 0.0, segs)
+    room_here = []  # the walls abeam of the boat's place on the path, when first needed
+
+    def here() -> tuple[float, float]:
+        if not room_here:
+            xy0, heading0 = path.at(progress_m)
+            room_here.append(_room(xy0, heading0, 0.0, segs))
+        return room_here[0]
+
     overtakes = []  # (track, s, d, half_len, half_wid, along, port_gap, stbd_gap)
-    for tr in tracks:
-        p = np.asarray(tr.position, float).reshape(2)
+    tracks = list(tracks)
+    positions = np.array([np.asarray(tr.position, float).reshape(2) for tr in tracks])
+    # every vessel on the path at once (the same answer as one at a time)
+    s_all, d_all = path.frame(positions, max(progress_m - 40.0, 0.0), progress_m + lookahead_m)
+    _, headings = path.at(s_all)
+    for k, (tr, s, d, h) in enumerate(zip(tracks, s_all.tolist(), d_all.tolist(),
+                                          headings.tolist())):
         v = np.asarray(tr.velocity, float).reshape(2)
-        s, d = path.frame(p[None], max(progress_m - 40.0, 0.0), progress_m + lookahead_m)
-        s, d = float(s[0]), float(d[0])
-        _, heading = path.at(s)
-        h = float(heading[0])
+        heading = headings[k:k + 1]
         along = float(v[0] * math.cos(h) + v[1] * math.sin(h))
         across = float(-v[0] * math.sin(h) + v[1] * math.cos(h))  # + to starboard
         ahead = s - progress_m
@@ -103,6 +111,7 @@ def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed
             kind = "clear"  # drifting, or moving away across the route: the slot keeps clear
         elif along < 0 and ahead > 0:
             kind = "meeting"
+            stbd0 = here()[1]
             room = stbd0 - (Rb + dp)  # how far to starboard the boat may go
             move = max(min(0.5 * stbd0, room), 0.0) if math.isfinite(stbd0) else Rb + dp
             meet_offset = max(meet_offset, move)
@@ -111,8 +120,8 @@ def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed
             kind = "overtaking"  # or following, decided below
             xy_v, _ = path.at(s)
             port, stbd = _room(xy_v, heading, 0.0, segs)  # the channel abeam of the vessel
-            port = port if math.isfinite(port) else port0  # not seen there yet: as it is here
-            stbd = stbd if math.isfinite(stbd) else stbd0
+            port = port if math.isfinite(port) else here()[0]  # not seen there yet: as here
+            stbd = stbd if math.isfinite(stbd) else here()[1]
             overtakes.append((tr, s, d, half_len, half_wid, along,
                               (d - half_wid) + port, stbd - (d + half_wid), len(encounters),
                               port, stbd))

@@ -70,13 +70,22 @@ def select_segments(segments, position, n_slots: int = 16, range_m: float = np.i
                     path=None) -> SegmentSelection:
     """Fill `n_slots` slots with the segments within `range_m` of `position`, nearest the
     planned `path` (K, 2) first (nearest `position` when there is no path)."""
-    arr = check_segments(segments)
+    return select_checked(check_segments(segments), position, n_slots, range_m, path)
+
+
+def select_checked(arr: np.ndarray, position, n_slots: int = 16, range_m: float = np.inf,
+                   path=None) -> SegmentSelection:
+    """`select_segments` for segments `check_segments` has already checked."""
     slots = np.zeros((n_slots, len(SLOT_FIELDS)))
     if len(arr) == 0:
         return SegmentSelection(slots, 0, np.inf)
-    points = np.asarray(position, float)[None, :2]
-    if path is not None:
-        points = np.vstack([points, np.asarray(path, float).reshape(-1, 2)])
+    position = np.asarray(position, float)
+    if path is None:
+        points = position[None, :2]
+    else:
+        path = np.asarray(path, float).reshape(-1, 2)
+        points = np.empty((len(path) + 1, 2))
+        points[0], points[1:] = position[:2], path
     distance = _distances(points, arr)  # row 0: from the boat
     in_range = np.flatnonzero(distance[0] <= range_m)
     to_plan = distance[:, in_range].min(axis=0)

@@ -47,29 +47,30 @@ def predict_vessels(tracks, n_slots: int, horizon: int, step_s: float, plan=None
         boat = np.asarray(plan, float).reshape(-1, 2)[1:horizon + 1]
     else:
         boat = np.tile(np.asarray(position, float).reshape(-1)[:2], (horizon, 1))
-    predicted, closest = [], []
-    for tr in tracks:
-        p = np.asarray(tr.position, float).reshape(2)
-        v = np.asarray(tr.velocity, float).reshape(2)
-        xy = p + t[:, None] * v
-        d = float(np.hypot(*(xy - boat).T).min() - 0.5 * float(tr.length_m))
-        predicted.append(xy)
-        closest.append(d)
-    order = [i for i in np.argsort(closest, kind="stable") if closest[i] <= range_m]
+    # every track at once, as arrays (n_tracks, ...): no loop over tracks or stages
+    positions = np.array([np.asarray(tr.position, float).reshape(2) for tr in tracks])
+    velocities = np.array([np.asarray(tr.velocity, float).reshape(2) for tr in tracks])
+    lengths = np.array([float(tr.length_m) for tr in tracks])
+    predicted = positions[:, None, :] + t[None, :, None] * velocities[:, None, :]
+    gap = predicted - boat
+    closest = np.hypot(gap[..., 0], gap[..., 1]).min(axis=1) - 0.5 * lengths
+    order = np.argsort(closest, kind="stable")
+    order = order[closest[order] <= range_m]
     chosen = order[:n_slots]
-    for j, i in enumerate(chosen):
-        tr = tracks[i]
-        cov = np.asarray(tr.covariance, float).reshape(4, 4)
-        var_p = 0.5 * max(cov[0, 0] + cov[1, 1], 0.0)
-        var_v = 0.5 * max(cov[2, 2] + cov[3, 3], 0.0)
-        grow = np.minimum(2 * sigma * np.sqrt(var_p + var_v * t * t), max_inflation_m)
-        slots[:, j, 0:2] = predicted[i]
-        slots[:, j, 2] = float(tr.heading_rad)
-        slots[:, j, 3] = float(tr.length_m) + grow
-        slots[:, j, 4] = float(tr.width_m) + grow
-        slots[:, j, 5] = 1.0
-    return VesselSelection(slots, tuple(tracks[i].id for i in chosen), len(order) - len(chosen),
-                           np.array([closest[i] for i in chosen]))
+    k = len(chosen)
+    if k:
+        cov = np.array([np.asarray(tracks[i].covariance, float).reshape(4, 4) for i in chosen])
+        var_p = 0.5 * np.maximum(cov[:, 0, 0] + cov[:, 1, 1], 0.0)
+        var_v = 0.5 * np.maximum(cov[:, 2, 2] + cov[:, 3, 3], 0.0)
+        grow = np.minimum(2 * sigma * np.sqrt(var_p[:, None] + var_v[:, None] * t * t),
+                          max_inflation_m).T  # (horizon, k)
+        slots[:, :k, 0:2] = predicted[chosen].transpose(1, 0, 2)
+        slots[:, :k, 2] = [float(tracks[i].heading_rad) for i in chosen]
+        slots[:, :k, 3] = lengths[chosen] + grow
+        slots[:, :k, 4] = np.array([float(tracks[i].width_m) for i in chosen]) + grow
+        slots[:, :k, 5] = 1.0
+    return VesselSelection(slots, tuple(tracks[i].id for i in chosen), len(order) - k,
+                           closest[chosen])
 
 
 def vessel_slot_margin(px, py, slot, margin):

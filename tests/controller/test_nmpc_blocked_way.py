@@ -126,8 +126,12 @@ def _loop(ctl, walls, barge, steps, barge_until_s=math.inf, blind_from_to=(math.
     return rows
 
 
-def test_a_barge_across_the_way_stops_the_boat_short_and_it_goes_on_when_it_is_moved():
-    ctl = NmpcController(NmpcConfig())
+@pytest.mark.parametrize("split", [False, True], ids=["one_phase", "split"])
+def test_a_barge_across_the_way_stops_the_boat_short_and_it_goes_on_when_it_is_moved(split):
+    """Also with the RTI split in preparation and feedback: when the barge's segment
+    vanishes the plan changes at once, and the prepared QP must still give the one-phase
+    answer (it fell back to a safe guess once while stage 0's input bounds were stale)."""
+    ctl = NmpcController(NmpcConfig(), split=split)
     walls = WALLS.copy()
     barge = np.array(across(150.0, -7.5, 7.5))
     rows = _loop(ctl, walls, barge, 1600, barge_until_s=110.0)

@@ -365,3 +365,25 @@ def test_the_split_step_gives_the_unsplit_answer_and_feeds_back_from_the_prepara
         assert a.stats.time_feedback_s > 0 and (k == 0 or a.stats.time_preparation_s > 0)
         x = b.states[1] * 0.1 + b.states[0] * 0.9  # somewhere along the plan, not on it
         x, act = x[:6].copy(), b.command
+
+
+def test_the_split_step_keeps_the_unsplit_answer_when_the_first_move_meets_its_rate_limit():
+    """A target speed that drops to 0 and comes back drives dnT_0 to its bounds: the
+    prepared QP must bound u_0 around the guess's u_0, not around the one of the last full
+    solve (the prepared step once broke the rate limit and fell back to a safe guess)."""
+    canal = straight_canal(width_m=20.0)
+    segs = canal.segments()
+    split, plain = NmpcController(CFG, split=True), NmpcController(CFG, split=False)
+    x, act = X0.copy(), ACT0.copy()
+    at_limit = 0
+    for k in range(30):
+        speed = 2.0 if k < 5 or k >= 20 else 0.0
+        a = split.step(x, act, segs, canal.waypoints, speed)
+        b = plain.step(x, act, segs, canal.waypoints, speed)
+        assert a.stats.ok and b.stats.ok and not a.stats.fallback
+        assert a.stats.fed_back == (k > 0)
+        assert np.abs(a.states - b.states).max() < 1e-9
+        assert np.abs(a.command - b.command).max() < 1e-9
+        at_limit += abs(b.rates[0]) >= CFG.dnT_max - 1e-6
+        x, act = b.states[1, :6] * 0.1 + b.states[0, :6] * 0.9, b.command
+    assert at_limit >= 5  # the case this test is about: dnT_0 on its bound
