@@ -512,7 +512,7 @@ def run_on_boat(args, console=sys.stderr) -> int:
     from bridge.clock import RealClock
     from bridge.link import AutopilotLink
     from bridge.onboard import geodetic_origin, parse_origin
-    from controller.identification.maneuvers import PAPER_RUNS, QUICK_RUNS
+    from controller.identification.maneuvers import PAPER_RUNS, QUICK_RUNS, with_overshoots
     from scenarios.scenario_file import load_scenario
 
     if not args.scenario:
@@ -528,6 +528,8 @@ def run_on_boat(args, console=sys.stderr) -> int:
         ekf_timeout_s=args.ekf_timeout,
         origin=None if args.origin is None else parse_origin(args.origin))
     origin = geodetic_origin(scenario, options)
+    runs = with_overshoots(QUICK_RUNS if args.quick else PAPER_RUNS,
+                           getattr(args, "overshoots", None))
     key = None
     if args.signing_key:
         from bridge.signing import load_signing_key
@@ -539,9 +541,8 @@ def run_on_boat(args, console=sys.stderr) -> int:
                          target_system=args.target_system, signing_key=key,
                          tlog_path=out / "mavlink.tlog", geodetic_origin=origin)
     try:
-        session = ManeuverSession(link, scenario, QUICK_RUNS if args.quick else PAPER_RUNS,
-                                  options, out, hold_s=args.hold, radius_m=args.radius,
-                                  console=console)
+        session = ManeuverSession(link, scenario, runs, options, out, hold_s=args.hold,
+                                  radius_m=args.radius, console=console)
         result = session.run()
     finally:
         link.close()
