@@ -11,6 +11,15 @@ surge equation alone (straight running: nS, v, r taken as zero). A sample whose 
 measured has zero weight; each run's initial state is estimated with the parameters (a
 position the stage does not fit is held at its first measurement).
 
+Noise weighting (`noise_model="ar1"`, the default): each stage is solved with W, then again
+with each channel W fits weighted by its own residual noise: the first fit's residuals of each
+channel modelled as AR(1), e_k = rho e_(k-1) + w_k, and the cost the sum of the whitened
+residuals squared over sigma_w^2 (generalised least squares; Prais-Winsten at the start of each
+measured stretch). An EKF's errors are coloured (position wandering over tens of seconds,
+velocity noise near the sway speed itself); with W the wandering position steers the fit, and
+whitened each channel counts for what it carries. Every solve shares one wall-time budget
+(`max_wall_s`, IPOPT's max_wall_time): past it, a SolverTimeLimit says so, never a hang.
+
 One zigzag at one speed does not separate the quadratic and cross sway-yaw terms from the
 linear ones (with realistic noise their standard errors exceed their size, and fitting them
 all at once trades Y_v against Y_v|v| and N_r against N_r|r|). So the sway-yaw stage fits the
