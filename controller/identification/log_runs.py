@@ -153,11 +153,12 @@ def _zigzags(log: FlightLog) -> list[tuple[int, int, str]]:
 
 def _piece(log: FlightLog, a: int, b: int, kind: str, use: str, how: str) -> ManeuverLog:
     t = log.time_s[a:b]
+    applied = log.commands[a:max(b - 1, a + 1)]  # the last sample's command comes after it
     meta = {
         "maneuver": kind, "use": use,
         "description": f"{kind} {how} in {log.source} at t = {t[0]:.1f}-{t[-1]:.1f} s "
-                       f"(nT {np.nanmin(log.commands[a:b, 0]):.1f}-{np.nanmax(log.commands[a:b, 0]):.1f} %, "
-                       f"|nS| up to {np.nanmax(np.abs(log.commands[a:b, 1])):.1f} %)",
+                       f"(nT {np.nanmin(applied[:, 0]):.1f}-{np.nanmax(applied[:, 0]):.1f} %, "
+                       f"|nS| up to {np.nanmax(np.abs(applied[:, 1])):.1f} %)",
         "window": f"{t[0]:.1f}:{t[-1]:.1f}",
         **{f"source.{k}": v for k, v in log.sources.items()},
     }
@@ -183,8 +184,10 @@ def cut_windows(log: FlightLog, windows) -> list[ManeuverLog]:
         bad = ~np.all(np.isfinite(log.commands[a:b]), axis=1)
         if bad.all():
             raise InputError(f"{log.source}: window {w.t0:g}:{w.t1:g} s: no commands there")
-        kind = ("surge" if np.nanmax(np.abs(log.commands[a:b, 1])) <= STRAIGHT_PCT
-                else "sway-yaw")
+        # the kind from the commands applied within the window: the last sample's is the
+        # one after it (what the boat did next), never used in the fit
+        applied = log.commands[a:max(b - 1, a + 1), 1]
+        kind = "surge" if np.nanmax(np.abs(applied)) <= STRAIGHT_PCT else "sway-yaw"
         keep = np.flatnonzero(~bad)
         out.append(_piece(log, a + int(keep[0]), a + int(keep[-1]) + 1, kind, w.use, "selected"))
     return out

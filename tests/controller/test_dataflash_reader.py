@@ -158,6 +158,11 @@ def test_runs_are_found_in_a_long_log_or_cut_by_window(tmp_path, trajectory):
     t0, t1 = zig.time_s[0], zig.time_s[-1]
     (cut,) = cut_windows(log, [Window.parse(f"{t0}:{t1}", "heldout")])
     assert cut.maneuver == "sway-yaw" and cut.heldout and cut.n_samples == zig.n_samples
+    # a window ending where the next manoeuvre's steering begins is still a surge run: its
+    # last sample's command is the one after it, never applied within the window
+    k = int(np.flatnonzero(np.abs(log.commands[:, 1]) > 1.0)[0])
+    (edge,) = cut_windows(log, [Window(surge.time_s[0], float(log.time_s[k]))])
+    assert edge.maneuver == "surge" and abs(edge.commands[-1, 1]) > 1.0
     with pytest.raises(InputError, match=r"window 10000:20000 s holds no samples \(the log runs"):
         cut_windows(log, [Window(1e4, 2e4)])
     with pytest.raises(InputError, match="expected T0:T1"):
