@@ -62,9 +62,9 @@ def register(sub) -> None:
                    help="ar1 (default): a second pass weighting each channel by its residual "
                    "noise, AR(1)-whitened; fixed: the paper's W only")
     p.add_argument("--time-limit", type=float, default=1800.0, metavar="S",
-                   help="wall time for the whole identification (default 1800): a solve still "
-                   "running then stops with an error saying so; optional sway-yaw terms not "
-                   "yet tried are left out, with a note")
+                   help="CPU seconds for the whole identification (default 1800): a solve "
+                   "still running then stops with an error saying so; optional sway-yaw terms "
+                   "not yet tried are left out, with a note")
     p.add_argument("--mass", type=float, default=1700.0, help="weight in kg (default 1700)")
     p.add_argument("--length", type=float, default=7.9, help="length in m (default 7.9)")
     p.add_argument("--breadth", type=float, default=2.6, help="breadth in m (default 2.6)")
@@ -95,7 +95,7 @@ def _config(args):
             raise InputError(f"--{name}: must be a positive number, got {value!r}")
     dims = BoatDimensions(mass_kg=args.mass, length_m=args.length, breadth_m=args.breadth)
     return SysidConfig(dimensions=dims, fixed=dict(args.fix), select=not args.all_terms,
-                       noise_model=args.noise_model, max_wall_s=args.time_limit)
+                       noise_model=args.noise_model, max_cpu_s=args.time_limit)
 
 
 def run(args) -> int:

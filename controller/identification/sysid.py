@@ -17,8 +17,9 @@ channel modelled as AR(1), e_k = rho e_(k-1) + w_k, and the cost the sum of the 
 residuals squared over sigma_w^2 (generalised least squares; Prais-Winsten at the start of each
 measured stretch). An EKF's errors are coloured (position wandering over tens of seconds,
 velocity noise near the sway speed itself); with W the wandering position steers the fit, and
-whitened each channel counts for what it carries. Every solve shares one wall-time budget
-(`max_wall_s`, IPOPT's max_wall_time): past it, a SolverTimeLimit says so, never a hang.
+whitened each channel counts for what it carries. Every solve shares one CPU-time budget
+(`max_cpu_s`, IPOPT's max_cpu_time; CPU, not wall time, so that a busy computer slows the
+identification without failing it): past it, a SolverTimeLimit says so, never a hang.
 
 One zigzag at one speed does not separate the quadratic and cross sway-yaw terms from the
 linear ones (with realistic noise their standard errors exceed their size, and fitting them
@@ -165,7 +166,7 @@ class SysidConfig:
     tol: float = 1e-8
     select: bool = True  # forward selection of OPTIONAL_TERMS; False fits all at once
     noise_model: str = "ar1"  # "ar1": residuals whitened and weighted by their noise; "fixed": W
-    max_wall_s: float = 1800.0  # all solves together: then a clear SolverError, not a hang
+    max_cpu_s: float = 1800.0  # CPU time of all solves together: then a clear SolverError
 
     def __post_init__(self) -> None:
         for name, value in self.fixed.items():
@@ -176,9 +177,9 @@ class SysidConfig:
         if self.noise_model not in NOISE_MODELS:
             raise InputError(f"--noise-model {self.noise_model!r}: expected one of "
                              f"{', '.join(NOISE_MODELS)}")
-        if not (math.isfinite(self.max_wall_s) and self.max_wall_s > 0):
+        if not (math.isfinite(self.max_cpu_s) and self.max_cpu_s > 0):
             raise InputError(f"--time-limit must be a positive number of seconds, got "
-                             f"{self.max_wall_s!r}")
+                             f"{self.max_cpu_s!r}")
 
     @property
     def anchor(self) -> str:
@@ -445,7 +446,7 @@ def _estimate_noise(datas: Sequence[_Data], trajectories, active: Sequence[int],
 
 
 class SolverTimeLimit(SolverError):
-    """The identification ran out of its wall-time budget (SysidConfig.max_wall_s)."""
+    """The identification ran out of its CPU-time budget (SysidConfig.max_cpu_s)."""
 
 
 def _solve_stage(name: str, datas: Sequence[_Data], free: Sequence[str], start: BoatParams,
@@ -459,10 +460,11 @@ def _solve_stage(name: str, datas: Sequence[_Data], free: Sequence[str], start: 
     import casadi as ca
 
     t0 = time.perf_counter()
-    limit = config.max_wall_s if deadline is None else deadline - t0
+    c0 = time.process_time()
+    limit = config.max_cpu_s if deadline is None else deadline - c0
     if limit <= 0:
-        raise SolverTimeLimit(f"sysid {name} stage: the time limit, {config.max_wall_s:g} s, is "
-                              "used up; raise it with --time-limit S")
+        raise SolverTimeLimit(f"sysid {name} stage: the time limit, {config.max_cpu_s:g} s of "
+                              "CPU, is used up; raise it with --time-limit S")
     active = [3] if straight else list(range(6))
     na = len(active)
     f_d = _stage_step(step, active)
@@ -515,7 +517,7 @@ def _solve_stage(name: str, datas: Sequence[_Data], free: Sequence[str], start: 
         "ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False,
         "show_eval_warnings": False,  # IPOPT backs off from a trial step that overflows
         "ipopt.max_iter": config.max_iter, "ipopt.tol": config.tol,
-        "ipopt.max_wall_time": max(limit - (time.perf_counter() - t0), 1e-3),
+        "ipopt.max_cpu_time": max(limit - (time.process_time() - c0), 1e-3),
     }
     solver = ca.nlpsol("sysid_" + name.replace("-", "_"), "ipopt", nlp, opts)
     t1 = time.perf_counter()
@@ -524,9 +526,9 @@ def _solve_stage(name: str, datas: Sequence[_Data], free: Sequence[str], start: 
     t2 = time.perf_counter()
     stats = solver.stats()
     status = str(stats.get("return_status", "?"))
-    if status == "Maximum_WallTime_Exceeded":
+    if status == "Maximum_CpuTime_Exceeded":
         raise SolverTimeLimit(f"sysid {name} stage: IPOPT stopped at the time limit, "
-                              f"{config.max_wall_s:g} s for the whole identification "
+                              f"{config.max_cpu_s:g} s of CPU for the whole identification "
                               f"({stats.get('iter_count')} iterations, not converged); raise "
                               "it with --time-limit S")
     if not stats.get("success", False) and status != "Solved_To_Acceptable_Level":
@@ -822,7 +824,7 @@ def identify(logs: Sequence[ManeuverLog], config: SysidConfig = SysidConfig()) -
         )
     stages, roles, se, det, dropped, failed = [], {}, {}, {}, {}, {}
     params = start
-    deadline = time.perf_counter() + config.max_wall_s
+    deadline = time.process_time() + config.max_cpu_s
     for stage, stage_logs, free, weights in (
         ("surge", surge_logs, surge_free, config.surge_weights),
         ("sway-yaw", sway_logs, sway_free, config.sway_yaw_weights),
@@ -867,7 +869,7 @@ def identify(logs: Sequence[ManeuverLog], config: SysidConfig = SysidConfig()) -
             except SolverTimeLimit:  # out of time: the model so far stands, the rest untried
                 for m in extras[i:]:
                     failed[m] = "not tried: the time limit ran out"
-                notes.append(f"the {config.max_wall_s:g} s time limit ran out during the "
+                notes.append(f"the {config.max_cpu_s:g} s time limit ran out during the "
                              f"{stage} stage's trials: {', '.join(extras[i:])} not tried "
                              "(raise it with --time-limit S)")
                 break

@@ -181,7 +181,7 @@ def test_the_noise_model_finds_an_ar1_residual():
 
 
 def test_the_time_limit_stops_with_a_clear_error(logs):
-    with pytest.raises(sysid.SolverTimeLimit, match=r"time limit, 0.001 s.*--time-limit"):
-        sysid.identify(list(logs.values()), sysid.SysidConfig(max_wall_s=1e-3))
+    with pytest.raises(sysid.SolverTimeLimit, match=r"time limit, 0.001 s of CPU.*--time-limit"):
+        sysid.identify(list(logs.values()), sysid.SysidConfig(max_cpu_s=1e-3))
     with pytest.raises(InputError, match="--time-limit"):
-        sysid.SysidConfig(max_wall_s=0.0)
+        sysid.SysidConfig(max_cpu_s=0.0)
