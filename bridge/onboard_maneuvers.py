@@ -6,8 +6,9 @@ deceleration staircase from steady 50.6 %, the 20 deg / 50 % zigzag at 42 %, the
 pre-flight checks as `canalnav bridge`. Each throttle level is held `hold_s` (the EKF's
 speed noise makes a steady-state test unreliable on the boat; 60 s is about four surge time
 constants of the paper's boat at its slowest level). Commands move no faster than the
-actuators (the scenario's rates), so the servo outputs that the autopilot logs are where the
-actuators are. Before each run the boat turns at low throttle to the heading with the most
+actuators (the scenario's rates, over the clock time measured between control steps), so the
+servo outputs that the autopilot logs are where the actuators are; control steps that come
+late (the loop behind the clock) are counted and reported. Before each run the boat turns at low throttle to the heading with the most
 water ahead (and stops, for a run from rest).
 
 Safe as the bridge: a lost link, a stale state, an unusable EKF position, a parameter change
@@ -55,6 +56,9 @@ HULL_MARGIN_M = 5.0  # a hull circle (R_b = 3 m) 2 m ahead of the reference poin
 STOP_FACTOR = 1.5  # on the model's coasting distance
 RAY_STEP_M = 5.0
 RAY_MAX_M = 2000.0
+LATE_FACTOR = 1.5  # a control step this many periods after the last is late
+LATE_WARN_AFTER = 10  # late steps before the warning (a few are normal on a busy computer)
+MAX_STEP_PERIODS = 5.0  # a late step moves the commands at most this many periods' worth
 
 
 class _Ended(CanalnavError):
@@ -84,6 +88,9 @@ class SessionResult:
     runs: list = field(default_factory=list)
     paths: list = field(default_factory=list)
     failsafes: list = field(default_factory=list)
+    steps: int = 0  # control steps
+    late_steps: int = 0  # of them late (the loop behind the clock)
+    worst_late_s: float = 0.0
 
 
 def coast_distance_m(params, speed_mps: float, to_mps: float = 0.2) -> float:
@@ -120,6 +127,10 @@ class ManeuverSession:
         self._servos = None
         self._start_xy = None
         self._next_t = None
+        self._last_tick = None
+        self.steps = 0
+        self.late_steps = 0  # control steps more than LATE_FACTOR periods after the last
+        self.worst_late_s = 0.0
         self._session_fh = None
         self._session = None
         self.failsafes: list[str] = []
@@ -166,6 +177,12 @@ class ManeuverSession:
             if self._session_fh is not None:
                 self._session_fh.close()
         result.failsafes = list(self.failsafes)
+        result.steps, result.late_steps = self.steps, self.late_steps
+        result.worst_late_s = self.worst_late_s
+        if self.late_steps:
+            self._say(f"maneuvers: control loop: {self.late_steps} of {self.steps} steps late "
+                      f"(> {LATE_FACTOR:g} periods after the last), the worst by "
+                      f"{self.worst_late_s:.2f} s")
         return result
 
     def _read_servo_params(self):
@@ -354,13 +371,32 @@ class ManeuverSession:
 
     # -- one control step -------------------------------------------------------------------
     def _tick(self, target):
-        """Move the commands toward `target` at the actuators' rates, send them, wait out the
-        control period reading the link; failsafes and the fence. Returns the state."""
+        """Move the commands toward `target` at the actuators' rates over the time measured
+        since the last step, send them, wait out the control period reading the link;
+        failsafes and the fence. Returns the state.
+
+        A step that comes late (the loop behind the clock: CPU load, a sped-up clock) moves
+        the commands by the time that passed, so the manoeuvre keeps its timing; it is
+        counted (`late_steps`), and said once, since the servo outputs then move in larger
+        jumps than the actuators follow in one step."""
         target = np.clip(np.asarray(target, float), -100.0, 100.0)
-        step = self.rates * self.period
+        now = self.clock.now()
+        elapsed = self.period if self._last_tick is None else now - self._last_tick
+        self._last_tick = now
+        self.steps += 1
+        if elapsed > LATE_FACTOR * self.period:
+            self.late_steps += 1
+            self.worst_late_s = max(self.worst_late_s, elapsed - self.period)
+            if self.late_steps == LATE_WARN_AFTER:
+                self._event(f"control loop late: step {self.steps} came {elapsed:.2f} s after "
+                            f"the last (period {self.period:g} s)")
+                self._say(f"maneuvers: warning: the control loop falls behind the clock ("
+                          f"{self.late_steps} of {self.steps} steps late, this one {elapsed:.2f} s "
+                          f"for a {self.period:g} s period): the servo outputs move in larger "
+                          "jumps; lower --speedup, or give sysid --actuator-rates")
+        step = self.rates * min(max(elapsed, 0.0), MAX_STEP_PERIODS * self.period)
         self._cmd = self._cmd + np.clip(target - self._cmd, -step, step)
         self.link.send_commands(*self._cmd)
-        now = self.clock.now()
         if self._next_t is None or self._next_t < now:
             self._next_t = now
         self._next_t += self.period
@@ -476,7 +512,7 @@ def run_on_boat(args, console=sys.stderr) -> int:
     from bridge.clock import RealClock
     from bridge.link import AutopilotLink
     from bridge.onboard import geodetic_origin, parse_origin
-    from controller.identification.maneuvers import PAPER_RUNS, QUICK_RUNS
+    from controller.identification.maneuvers import PAPER_RUNS, QUICK_RUNS, with_overshoots
     from scenarios.scenario_file import load_scenario
 
     if not args.scenario:
@@ -492,6 +528,8 @@ def run_on_boat(args, console=sys.stderr) -> int:
         ekf_timeout_s=args.ekf_timeout,
         origin=None if args.origin is None else parse_origin(args.origin))
     origin = geodetic_origin(scenario, options)
+    runs = with_overshoots(QUICK_RUNS if args.quick else PAPER_RUNS,
+                           getattr(args, "overshoots", None))
     key = None
     if args.signing_key:
         from bridge.signing import load_signing_key
@@ -503,9 +541,8 @@ def run_on_boat(args, console=sys.stderr) -> int:
                          target_system=args.target_system, signing_key=key,
                          tlog_path=out / "mavlink.tlog", geodetic_origin=origin)
     try:
-        session = ManeuverSession(link, scenario, QUICK_RUNS if args.quick else PAPER_RUNS,
-                                  options, out, hold_s=args.hold, radius_m=args.radius,
-                                  console=console)
+        session = ManeuverSession(link, scenario, runs, options, out, hold_s=args.hold,
+                                  radius_m=args.radius, console=console)
         result = session.run()
     finally:
         link.close()

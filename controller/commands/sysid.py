@@ -28,7 +28,10 @@ def register(sub) -> None:
         "an ArduPilot DataFlash log (.BIN) of the boat itself: state from the EKF's messages "
         "(XKF1, else POS/GPS, ATT, IMU), commands from the servo outputs (RCOU with the "
         "SERVOn_* in its PARM records), the runs found in it (steady throttle steps, zigzags) "
-        "or cut with --window.",
+        "or cut with --window. By default each stage is solved twice: with W, then with each "
+        "fitted channel weighted by its own residual noise (an AR(1) model of the first "
+        "fit's residuals, whitened): an EKF's errors wander, and W would let the wandering "
+        "position steer the fit.",
     )
     p.add_argument("logs", nargs="+", metavar="LOG",
                    help="CSV manoeuvre logs, or ArduPilot DataFlash logs (.BIN)")
@@ -55,6 +58,13 @@ def register(sub) -> None:
     p.add_argument("--all-terms", action="store_true",
                    help="fit every sway-yaw term at once instead of adding the quadratic and "
                    "cross terms one at a time when the data determine them")
+    p.add_argument("--noise-model", choices=("ar1", "fixed"), default="ar1",
+                   help="ar1 (default): a second pass weighting each channel by its residual "
+                   "noise, AR(1)-whitened; fixed: the paper's W only")
+    p.add_argument("--time-limit", type=float, default=1800.0, metavar="S",
+                   help="CPU seconds for the whole identification (default 1800): a solve "
+                   "still running then stops with an error saying so; optional sway-yaw terms "
+                   "not yet tried are left out, with a note")
     p.add_argument("--mass", type=float, default=1700.0, help="weight in kg (default 1700)")
     p.add_argument("--length", type=float, default=7.9, help="length in m (default 7.9)")
     p.add_argument("--breadth", type=float, default=2.6, help="breadth in m (default 2.6)")
@@ -84,7 +94,8 @@ def _config(args):
         if not (math.isfinite(value) and value > 0):
             raise InputError(f"--{name}: must be a positive number, got {value!r}")
     dims = BoatDimensions(mass_kg=args.mass, length_m=args.length, breadth_m=args.breadth)
-    return SysidConfig(dimensions=dims, fixed=dict(args.fix), select=not args.all_terms)
+    return SysidConfig(dimensions=dims, fixed=dict(args.fix), select=not args.all_terms,
+                       noise_model=args.noise_model, max_cpu_s=args.time_limit)
 
 
 def run(args) -> int:
@@ -155,7 +166,10 @@ def _read_any(path: str, args) -> list:
     if windows:
         runs = cut_windows(flight, windows + heldout)
     else:
-        runs = find_runs(flight) + (cut_windows(flight, heldout) if heldout else [])
+        # a run found where a held-out window lies is held out, not fitted as well
+        found = [r for r in find_runs(flight)
+                 if not any(r.time_s[0] <= w.t1 and r.time_s[-1] >= w.t0 for w in heldout)]
+        runs = found + (cut_windows(flight, heldout) if heldout else [])
     if not runs:
         raise InputError(f"{path}: no identification run found (straight throttle steps, "
                          "zigzags); select stretches with --window T0:T1")

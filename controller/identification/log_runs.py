@@ -2,14 +2,17 @@
 
 A boat's own log holds everything it did; identification wants the manoeuvres. Found
 automatically from the commands:
-- a *surge run* is a stretch of straight running (|nS| <= 1 % throughout, from `SETTLE_S`
+- a *surge run* is a stretch of straight running ahead (|nS| <= 1 % and nT >= 0 throughout:
+  reverse thrust, braking, is not the propeller the surge model describes; from `SETTLE_S`
   after the last turn so that sway and yaw have died out) with at least one throttle step of
   `MIN_STEP_PCT` or more and `MIN_SURGE_S` long; tagged acceleration or deceleration by the
   direction of its first step (surge when it goes both ways);
 - a *zigzag* is a train of at least `MIN_REVERSALS` + 1 steering blocks (|nS| >= 5 %) of
   alternating sign, each change of side within `MAX_CROSSING_S`, at steady throttle (within
   `MAX_THROTTLE_SPREAD_PCT`); the run starts `LEAD_S` before the first block and ends
-  `TAIL_S` after the last (or when the next command change comes).
+  `TAIL_S` after the last (or when the next command change comes). The commands must be
+  known throughout; a short stretch without state (a gap in the log, at most
+  `MAX_MISSING_S`) stays in the run, not measured there.
 Or cut by hand, `Window(t0, t1)`, in the log's own time (seconds since boot, as ArduPilot's
 log viewers show it), kind from the content.
 """
@@ -34,6 +37,7 @@ MAX_CROSSING_S = 5.0
 MAX_THROTTLE_SPREAD_PCT = 2.0
 LEAD_S = 5.0
 TAIL_S = 5.0
+MAX_MISSING_S = 3.0
 
 
 @dataclass(frozen=True)
@@ -69,11 +73,16 @@ def _usable(log: FlightLog) -> np.ndarray:
     return np.all(np.isfinite(log.commands), axis=1) & np.isfinite(log.states[:, 3])
 
 
+def _longest_missing(measured: np.ndarray) -> int:
+    """Samples in the longest stretch of `measured` False."""
+    return max((b - a for a, b in _runs(~measured)), default=0)
+
+
 def _surge_runs(log: FlightLog) -> list[tuple[int, int, str]]:
     t, nT, nS = log.time_s, log.commands[:, 0], log.commands[:, 1]
     dt = float(np.median(np.diff(t)))
     out = []
-    straight = _usable(log) & (np.abs(nS) <= STRAIGHT_PCT)
+    straight = _usable(log) & (np.abs(nS) <= STRAIGHT_PCT) & (nT >= 0.0)
     for a, b in _runs(straight):
         if a > 0:  # after a turn: let sway and yaw die out first
             a = min(b, a + int(round(SETTLE_S / dt)))
@@ -122,7 +131,9 @@ def _zigzags(log: FlightLog) -> list[tuple[int, int, str]]:
         away = np.flatnonzero(np.abs(nT[first:last] - level) > MAX_THROTTLE_SPREAD_PCT)
         if away.size:  # the throttle left the zigzag's level: the run ended there
             last = first + int(away[0])
-        if last <= train[-2][1] or not usable[first:last].all():
+        commanded = np.all(np.isfinite(log.commands[first:last]), axis=1)
+        if (last <= train[-2][1] or not commanded.all()
+                or _longest_missing(usable[first:last]) * dt > MAX_MISSING_S):
             continue
         # the lead-in and the tail: straight, at the same throttle, at most LEAD_S / TAIL_S
 
@@ -142,11 +153,12 @@ def _zigzags(log: FlightLog) -> list[tuple[int, int, str]]:
 
 def _piece(log: FlightLog, a: int, b: int, kind: str, use: str, how: str) -> ManeuverLog:
     t = log.time_s[a:b]
+    applied = log.commands[a:max(b - 1, a + 1)]  # the last sample's command comes after it
     meta = {
         "maneuver": kind, "use": use,
         "description": f"{kind} {how} in {log.source} at t = {t[0]:.1f}-{t[-1]:.1f} s "
-                       f"(nT {np.nanmin(log.commands[a:b, 0]):.1f}-{np.nanmax(log.commands[a:b, 0]):.1f} %, "
-                       f"|nS| up to {np.nanmax(np.abs(log.commands[a:b, 1])):.1f} %)",
+                       f"(nT {np.nanmin(applied[:, 0]):.1f}-{np.nanmax(applied[:, 0]):.1f} %, "
+                       f"|nS| up to {np.nanmax(np.abs(applied[:, 1])):.1f} %)",
         "window": f"{t[0]:.1f}:{t[-1]:.1f}",
         **{f"source.{k}": v for k, v in log.sources.items()},
     }
@@ -172,8 +184,10 @@ def cut_windows(log: FlightLog, windows) -> list[ManeuverLog]:
         bad = ~np.all(np.isfinite(log.commands[a:b]), axis=1)
         if bad.all():
             raise InputError(f"{log.source}: window {w.t0:g}:{w.t1:g} s: no commands there")
-        kind = ("surge" if np.nanmax(np.abs(log.commands[a:b, 1])) <= STRAIGHT_PCT
-                else "sway-yaw")
+        # the kind from the commands applied within the window: the last sample's is the
+        # one after it (what the boat did next), never used in the fit
+        applied = log.commands[a:max(b - 1, a + 1), 1]
+        kind = "surge" if np.nanmax(np.abs(applied)) <= STRAIGHT_PCT else "sway-yaw"
         keep = np.flatnonzero(~bad)
         out.append(_piece(log, a + int(keep[0]), a + int(keep[-1]) + 1, kind, w.use, "selected"))
     return out

@@ -12,6 +12,8 @@ positions would.
 
 from __future__ import annotations
 
+import dataclasses
+
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -112,6 +114,23 @@ QUICK_RUNS: tuple[Run, ...] = (
     ZigzagRun("04_heldout_zigzag_10_30", 10.0, 30.0, 42.0, overshoots=2, use="heldout"),
 )
 """A shorter set (fewer throttle steps, looser steady state) for fast tests and demos."""
+
+MAX_OVERSHOOTS = 50
+
+
+def with_overshoots(runs: tuple[Run, ...], overshoots: int | None) -> tuple[Run, ...]:
+    """`runs` with the fit zigzags' overshoots set to `overshoots` (None: as they are). A
+    longer zigzag gives the sway-yaw fit more to work with where the state is noisy (an EKF's
+    estimate); the held-out zigzag stays as it is."""
+    if overshoots is None:
+        return tuple(runs)
+    if not (isinstance(overshoots, int) and 1 <= overshoots <= MAX_OVERSHOOTS):
+        from ..errors import InputError
+
+        raise InputError(f"--overshoots must be a whole number from 1 to {MAX_OVERSHOOTS}, "
+                         f"got {overshoots!r}")
+    return tuple(dataclasses.replace(r, overshoots=overshoots)
+                 if isinstance(r, ZigzagRun) and r.use == "fit" else r for r in runs)
 
 
 @dataclass

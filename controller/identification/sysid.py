@@ -11,6 +11,16 @@ surge equation alone (straight running: nS, v, r taken as zero). A sample whose 
 measured has zero weight; each run's initial state is estimated with the parameters (a
 position the stage does not fit is held at its first measurement).
 
+Noise weighting (`noise_model="ar1"`, the default): each stage is solved with W, then again
+with each channel W fits weighted by its own residual noise: the first fit's residuals of each
+channel modelled as AR(1), e_k = rho e_(k-1) + w_k, and the cost the sum of the whitened
+residuals squared over sigma_w^2 (generalised least squares; Prais-Winsten at the start of each
+measured stretch). An EKF's errors are coloured (position wandering over tens of seconds,
+velocity noise near the sway speed itself); with W the wandering position steers the fit, and
+whitened each channel counts for what it carries. Every solve shares one CPU-time budget
+(`max_cpu_s`, IPOPT's max_cpu_time; CPU, not wall time, so that a busy computer slows the
+identification without failing it): past it, a SolverTimeLimit says so, never a hang.
+
 One zigzag at one speed does not separate the quadratic and cross sway-yaw terms from the
 linear ones (with realistic noise their standard errors exceed their size, and fitting them
 all at once trades Y_v against Y_v|v| and N_r against N_r|r|). So the sway-yaw stage fits the
@@ -58,6 +68,9 @@ OPTIONAL_TERMS = ("Yvv", "Nrr", "Yr", "Nv", "Yrr", "Nvv")
 """Sway-yaw terms beyond the linear diagonal core (m22 m33 Yv Nr), added one at a time in
 this order and kept only when the data tell them from zero (forward selection)."""
 SELECT_T = 2.0
+NOISE_MODELS = ("ar1", "fixed")
+RHO_MAX = 0.999
+"""AR(1) noise model: a residual channel's lag-one correlation is kept below this."""
 NEGLIGIBLE_RATIO = 1e-3
 """A true value below this fraction of the parameter's typical size (its guess) counts as
 zero: no ratio error is shown for it."""
@@ -152,6 +165,8 @@ class SysidConfig:
     max_iter: int = 300
     tol: float = 1e-8
     select: bool = True  # forward selection of OPTIONAL_TERMS; False fits all at once
+    noise_model: str = "ar1"  # "ar1": residuals whitened and weighted by their noise; "fixed": W
+    max_cpu_s: float = 1800.0  # CPU time of all solves together: then a clear SolverError
 
     def __post_init__(self) -> None:
         for name, value in self.fixed.items():
@@ -159,6 +174,12 @@ class SysidConfig:
                 raise InputError(f"--fix {name}: unknown parameter (known: {', '.join(PARAM_NAMES)})")
             if not math.isfinite(value):
                 raise InputError(f"--fix {name}: value {value!r} is not finite")
+        if self.noise_model not in NOISE_MODELS:
+            raise InputError(f"--noise-model {self.noise_model!r}: expected one of "
+                             f"{', '.join(NOISE_MODELS)}")
+        if not (math.isfinite(self.max_cpu_s) and self.max_cpu_s > 0):
+            raise InputError(f"--time-limit must be a positive number of seconds, got "
+                             f"{self.max_cpu_s!r}")
 
     @property
     def anchor(self) -> str:
@@ -196,6 +217,9 @@ class StageReport:
     solve_s: float
     covariance_s: float
     passes: int = 1  # NLPs solved: the core, then one trial per optional term
+    noise: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    """Per fitted channel (display name): the residual noise's standard deviation (SI) and
+    correlation time (s) of the AR(1) model the fit weighted by; empty with fixed weights."""
 
 
 @dataclass(frozen=True)
@@ -354,14 +378,93 @@ def _stage_commands(log: ManeuverLog, straight: bool) -> np.ndarray:
     return commands
 
 
+@dataclass(frozen=True)
+class _Noise:
+    """AR(1) model of one channel's residuals, e_k = rho e_(k-1) + w_k with w white of
+    standard deviation sigma_w; `weight` multiplies the whitened squares in the cost."""
+
+    rho: float
+    sigma_w: float
+    weight: float
+
+    def stationary_sd(self) -> float:
+        return self.sigma_w / math.sqrt(1.0 - self.rho**2)
+
+    def correlation_time(self, dt: float) -> float:
+        return math.inf if self.rho >= 1 else (0.0 if self.rho <= 0 else -dt / math.log(self.rho))
+
+
+def _whitening_index(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For the measured sample indices `rows` (increasing): the positions (into rows) that
+    directly follow their predecessor, whitened as e_j - rho e_(j-1); and the others, the
+    first of each measured stretch, scaled by sqrt(1 - rho^2) (Prais-Winsten)."""
+    adjacent = np.flatnonzero(np.diff(rows) == 1) + 1
+    return adjacent, np.setdiff1d(np.arange(rows.size), adjacent)
+
+
+def _whiten(a: np.ndarray, rows: np.ndarray, rho: float) -> np.ndarray:
+    """The AR(1) whitening filter along axis 0 of `a` (one entry per measured sample)."""
+    adjacent, _ = _whitening_index(rows)
+    out = math.sqrt(1.0 - rho**2) * a
+    out[adjacent] = a[adjacent] - rho * a[adjacent - 1]
+    return out
+
+
+def _estimate_noise(datas: Sequence[_Data], trajectories, active: Sequence[int],
+                    wa: np.ndarray, cost: float) -> dict[int, _Noise]:
+    """Each fitted channel's residual noise as AR(1), from a fit's residuals: an EKF's errors
+    wander (position over tens of seconds), and weighting every channel by its own noise,
+    whitened, is what the likelihood asks for; fixed weights let a wandering channel steer the
+    fit. The weights are scaled so that the cost keeps the size it had (`cost`)."""
+    found, n_terms = {}, 0
+    for k, c in enumerate(active):
+        if wa[k] <= 0:
+            continue
+        num = den = 0.0
+        pieces = []
+        for data, X in zip(datas, trajectories):
+            rows = np.flatnonzero(data.measured[:, c])
+            if rows.size < 2:
+                continue
+            e = X[k, rows] - data.values[rows, c]
+            adjacent, _ = _whitening_index(rows)
+            num += float(e[adjacent] @ e[adjacent - 1])
+            den += float(e[adjacent - 1] @ e[adjacent - 1])
+            pieces.append((e, rows))
+        if not pieces:
+            continue
+        rho = float(np.clip(num / den, 0.0, RHO_MAX)) if den > 0 else 0.0
+        w = np.concatenate([_whiten(e, rows, rho) for e, rows in pieces])
+        sigma_w = float(np.sqrt(np.mean(w**2)))
+        if sigma_w > 0:
+            found[c] = (rho, sigma_w)
+            n_terms += w.size
+    if not found:
+        return {}
+    scale = max(cost, 1e-12) / n_terms  # each whitened term is ~1 after dividing by sigma_w^2
+    return {c: _Noise(rho, sw, scale / sw**2) for c, (rho, sw) in found.items()}
+
+
+class SolverTimeLimit(SolverError):
+    """The identification ran out of its CPU-time budget (SysidConfig.max_cpu_s)."""
+
+
 def _solve_stage(name: str, datas: Sequence[_Data], free: Sequence[str], start: BoatParams,
                  scales: Mapping[str, float], weights: Sequence[float],
                  config: SysidConfig, step, trajectories=None,
-                 straight: bool = False) -> _StageSolution:
-    """One NLP (eq. SI) over the stage's runs by multiple shooting; then its covariance."""
+                 straight: bool = False, noise: Mapping[int, _Noise] | None = None,
+                 deadline: float | None = None) -> _StageSolution:
+    """One NLP (eq. SI) over the stage's runs by multiple shooting; then its covariance.
+    With `noise` the cost is each channel's AR(1)-whitened residuals over its noise instead
+    of the weights W (the channels W leaves out stay out)."""
     import casadi as ca
 
     t0 = time.perf_counter()
+    c0 = time.process_time()
+    limit = config.max_cpu_s if deadline is None else deadline - c0
+    if limit <= 0:
+        raise SolverTimeLimit(f"sysid {name} stage: the time limit, {config.max_cpu_s:g} s of "
+                              "CPU, is used up; raise it with --time-limit S")
     active = [3] if straight else list(range(6))
     na = len(active)
     f_d = _stage_step(step, active)
@@ -380,10 +483,26 @@ def _solve_stage(name: str, datas: Sequence[_Data], free: Sequence[str], start: 
         X_next = f_d.map(n - 1)(X[:, :-1], _stage_commands(data.log, straight),
                                 ca.repmat(p, 1, n - 1), np.diff(data.log.time_s))
         g.append(ca.vec(X_next - X[:, 1:]))
-        measured = data.measured[:, active]
-        root_w = (np.sqrt(wa)[None, :] * measured).T  # (na, N): zero where not measured
-        target = np.where(measured, data.values[:, active], 0.0).T
-        cost = cost + ca.sumsqr(root_w * (X - target))
+        if noise is None:
+            measured = data.measured[:, active]
+            root_w = (np.sqrt(wa)[None, :] * measured).T  # (na, N): zero where not measured
+            target = np.where(measured, data.values[:, active], 0.0).T
+            cost = cost + ca.sumsqr(root_w * (X - target))
+        else:
+            for k, c in enumerate(active):
+                rows = np.flatnonzero(data.measured[:, c])
+                if c not in noise or not rows.size:
+                    continue
+                nz = noise[c]
+                e = ca.vec(X[k, rows.tolist()]) - data.values[rows, c]
+                adjacent, starts = _whitening_index(rows)
+                terms = 0
+                if adjacent.size:
+                    terms = terms + ca.sumsqr(e[adjacent.tolist()]
+                                              - nz.rho * e[(adjacent - 1).tolist()])
+                if starts.size:
+                    terms = terms + (1.0 - nz.rho**2) * ca.sumsqr(e[starts.tolist()])
+                cost = cost + nz.weight * terms
         w.append(ca.vec(X))
         lo, hi = np.full((na, n), -np.inf), np.full((na, n), np.inf)
         guess_traj = (data.filled[:, active].T if trajectories is None
@@ -398,6 +517,7 @@ def _solve_stage(name: str, datas: Sequence[_Data], free: Sequence[str], start: 
         "ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False,
         "show_eval_warnings": False,  # IPOPT backs off from a trial step that overflows
         "ipopt.max_iter": config.max_iter, "ipopt.tol": config.tol,
+        "ipopt.max_cpu_time": max(limit - (time.process_time() - c0), 1e-3),
     }
     solver = ca.nlpsol("sysid_" + name.replace("-", "_"), "ipopt", nlp, opts)
     t1 = time.perf_counter()
@@ -406,6 +526,11 @@ def _solve_stage(name: str, datas: Sequence[_Data], free: Sequence[str], start: 
     t2 = time.perf_counter()
     stats = solver.stats()
     status = str(stats.get("return_status", "?"))
+    if status == "Maximum_CpuTime_Exceeded":
+        raise SolverTimeLimit(f"sysid {name} stage: IPOPT stopped at the time limit, "
+                              f"{config.max_cpu_s:g} s of CPU for the whole identification "
+                              f"({stats.get('iter_count')} iterations, not converged); raise "
+                              "it with --time-limit S")
     if not stats.get("success", False) and status != "Solved_To_Acceptable_Level":
         raise SolverError(f"sysid {name} stage: IPOPT did not converge ({status}, "
                           f"{stats.get('iter_count')} iterations)")
@@ -417,15 +542,25 @@ def _solve_stage(name: str, datas: Sequence[_Data], free: Sequence[str], start: 
         trajs.append(wopt[offset:offset + na * n].reshape((na, n), order="F"))
         x0s.append(trajs[-1][:, 0].copy())
         offset += na * n
-    cov, info, rms = _covariance(datas, free, est, scales, wa, x0s, f_d, active, straight)
+    cov, info, rms = _covariance(datas, free, est, scales, wa, x0s, f_d, active, straight,
+                                 noise)
     t3 = time.perf_counter()
     report = StageReport(
         name=name, logs=tuple(d.log.source for d in datas), free=tuple(free),
         n_samples=int(sum(d.log.n_samples for d in datas)),
         iterations=int(stats.get("iter_count", -1)), status=status,
         cost=float(sol["f"]), rms=rms, build_s=t1 - t0, solve_s=t2 - t1, covariance_s=t3 - t2,
+        noise=_noise_report(noise, datas),
     )
     return _StageSolution(est, cov, info, report, x0s, trajs)
+
+
+def _noise_report(noise, datas) -> dict[str, tuple[float, float]]:
+    if not noise:
+        return {}
+    dt = float(np.median(np.concatenate([np.diff(d.log.time_s) for d in datas])))
+    return {STATE_COLUMNS[c]: (nz.stationary_sd(), nz.correlation_time(dt))
+            for c, nz in sorted(noise.items())}
 
 
 def _merge_passes(passes: Sequence[StageReport], last: StageReport) -> StageReport:
@@ -436,7 +571,7 @@ def _merge_passes(passes: Sequence[StageReport], last: StageReport) -> StageRepo
         iterations=sum(p.iterations for p in passes), status=last.status, cost=last.cost,
         rms=last.rms, build_s=sum(p.build_s for p in passes),
         solve_s=sum(p.solve_s for p in passes),
-        covariance_s=sum(p.covariance_s for p in passes), passes=len(passes),
+        covariance_s=sum(p.covariance_s for p in passes), passes=len(passes), noise=last.noise,
     )
 
 
@@ -450,11 +585,13 @@ def _safe_inverse(A: np.ndarray, floor: float = 1e-12) -> np.ndarray:
     return inv / np.outer(d, d)
 
 
-def _covariance(datas, free, est: BoatParams, scales, wa, x0s, f_d, active, straight):
+def _covariance(datas, free, est: BoatParams, scales, wa, x0s, f_d, active, straight,
+                noise=None):
     """Gauss-Newton covariance of the free parameters, each run's fitted x0 a nuisance.
 
     J = d(simulated measured states)/d(theta, x0) at the optimum; A = J'WJ;
-    cov = A^-1 J'W S W J A^-1 with S the residual variance of each channel.
+    cov = A^-1 J'W S W J A^-1 with S the residual variance of each channel. With a noise
+    model, J and the residuals are whitened as in the cost and W is its weights.
     """
     import casadi as ca
 
@@ -464,12 +601,13 @@ def _covariance(datas, free, est: BoatParams, scales, wa, x0s, f_d, active, stra
                      for n in PARAM_NAMES])
     theta_hat = np.array([getattr(est, n) / scales[n] for n in free])
     blocks, resid_rows, chan_rows, weight_rows, series_rows, n_nuisance = [], [], [], [], [], []
+    raw_rows = []  # the residuals before whitening, for the RMS shown
     n_series = 0
     for data, x0 in zip(datas, x0s):
         n = data.log.n_samples
         rows = [(k, np.flatnonzero(data.measured[:, c])) for k, c in enumerate(active)
                 if wa[k] > 0]
-        rows = [(k, r) for k, r in rows if r.size]
+        rows = [(k, r) for k, r in rows if r.size and (noise is None or active[k] in noise)]
         pinned = _pinned(data, active, wa)
         free_x0 = [k for k in range(len(active)) if k not in pinned]
         z = ca.MX.sym("z", len(free_x0))
@@ -481,14 +619,26 @@ def _covariance(datas, free, est: BoatParams, scales, wa, x0s, f_d, active, stra
         pred = ca.vertcat(*[X[k, r.tolist()].T for k, r in rows])
         f = ca.Function("sens", [theta, z], [pred, ca.jacobian(pred, ca.vertcat(theta, z))])
         pred_v, jac = f(theta_hat, x0[free_x0])
-        resid_rows.append(np.asarray(pred_v).ravel()
-                          - np.concatenate([data.values[r, active[k]] for k, r in rows]))
+        resid = np.asarray(pred_v).ravel() - np.concatenate([data.values[r, active[k]]
+                                                             for k, r in rows])
+        jac = np.asarray(jac)
+        raw_rows.append(resid.copy())
+        if noise is not None:
+            at = 0
+            for k, r in rows:
+                sl = slice(at, at + r.size)
+                resid[sl] = _whiten(resid[sl], r, noise[active[k]].rho)
+                jac[sl] = _whiten(jac[sl], r, noise[active[k]].rho)
+                at += r.size
+        resid_rows.append(resid)
         chan_rows.append(np.concatenate([np.full(r.size, active[k]) for k, r in rows]))
-        weight_rows.append(np.concatenate([np.full(r.size, wa[k]) for k, r in rows]))
+        weight_rows.append(np.concatenate([
+            np.full(r.size, wa[k] if noise is None else noise[active[k]].weight)
+            for k, r in rows]))
         series_rows.append(np.concatenate([np.full(r.size, n_series + j)
                                            for j, (_, r) in enumerate(rows)]))
         n_series += len(rows)
-        blocks.append(np.asarray(jac))
+        blocks.append(jac)
         n_nuisance.append(len(free_x0))
     # J: shared parameter columns, then a block of initial-state columns per run
     n_cols = n_free + sum(n_nuisance)
@@ -499,14 +649,15 @@ def _covariance(datas, free, est: BoatParams, scales, wa, x0s, f_d, active, stra
         J[row:row + b.shape[0], col:col + k] = b[:, n_free:]
         row, col = row + b.shape[0], col + k
     resid, chan = np.concatenate(resid_rows), np.concatenate(chan_rows)
+    raw = np.concatenate(raw_rows)
     wrow = np.concatenate(weight_rows)
     dof_factor = resid.size / max(resid.size - n_cols, 1)
     sigma2 = np.zeros(resid.size)
     rms = {}
     for c in np.unique(chan):
         sel = chan == c
-        var = float(np.mean(resid[sel] ** 2))
-        sigma2[sel] = var * dof_factor
+        sigma2[sel] = float(np.mean(resid[sel] ** 2)) * dof_factor
+        var = float(np.mean(raw[sel] ** 2))
         unit = {0: "m", 1: "m", 2: "deg", 3: "m/s", 4: "m/s", 5: "deg/s"}[int(c)]
         rms[f"{STATE_COLUMNS[c]} [{unit}]"] = (math.degrees(math.sqrt(var)) if c in (2, 5)
                                                else math.sqrt(var))
@@ -673,6 +824,7 @@ def identify(logs: Sequence[ManeuverLog], config: SysidConfig = SysidConfig()) -
         )
     stages, roles, se, det, dropped, failed = [], {}, {}, {}, {}, {}
     params = start
+    deadline = time.process_time() + config.max_cpu_s
     for stage, stage_logs, free, weights in (
         ("surge", surge_logs, surge_free, config.surge_weights),
         ("sway-yaw", sway_logs, sway_free, config.sway_yaw_weights),
@@ -693,15 +845,34 @@ def identify(logs: Sequence[ManeuverLog], config: SysidConfig = SysidConfig()) -
         core = [n for n in free if n not in extras]
         # the core model first, the optional terms held at zero
         sol = _solve_stage(stage, datas, core, params.replace(**{n: 0.0 for n in extras}),
-                           scales, weights, config, step, straight=straight)
+                           scales, weights, config, step, straight=straight, deadline=deadline)
         passes = [sol.report]
+        noise = None
+        if config.noise_model == "ar1":
+            # again, each channel weighted by its own residual noise (AR(1), whitened)
+            active = [3] if straight else list(range(6))
+            wa = np.asarray(weights, float)[active]
+            noise = _estimate_noise(datas, sol.trajectories, active, wa, sol.report.cost) or None
+            if noise is not None:
+                sol = _solve_stage(stage, datas, core, sol.params, scales, weights, config,
+                                   step, sol.trajectories, straight=straight, noise=noise,
+                                   deadline=deadline)
+                passes.append(sol.report)
         free = list(core)
-        for n in extras:
+        for i, n in enumerate(extras):
             # forward selection: keep a term only if the data tell it from zero (> 2 SE)
             try:
                 trial = _solve_stage(stage, datas, free + [n],
                                      sol.params.replace(**{n: getattr(start, n)}), scales,
-                                     weights, config, step, sol.trajectories, straight=straight)
+                                     weights, config, step, sol.trajectories, straight=straight,
+                                     noise=noise, deadline=deadline)
+            except SolverTimeLimit:  # out of time: the model so far stands, the rest untried
+                for m in extras[i:]:
+                    failed[m] = "not tried: the time limit ran out"
+                notes.append(f"the {config.max_cpu_s:g} s time limit ran out during the "
+                             f"{stage} stage's trials: {', '.join(extras[i:])} not tried "
+                             "(raise it with --time-limit S)")
+                break
             except SolverError as exc:  # a trial that fails leaves its term out, not the run
                 failed[n] = str(exc)
                 continue
@@ -767,6 +938,13 @@ def identify(logs: Sequence[ManeuverLog], config: SysidConfig = SysidConfig()) -
 
 
 # -- presentation ---------------------------------------------------------------------------------
+def _display(channel: str, value: float) -> str:
+    """A channel's SI value with its display unit (angles in degrees)."""
+    if channel in ("psi", "r"):
+        return f"{math.degrees(value):.3g} {'deg' if channel == 'psi' else 'deg/s'}"
+    return f"{value:.3g} {'m' if channel in ('x', 'y') else 'm/s'}"
+
+
 def format_table(result: SysidResult) -> str:
     """The human report: stages, the parameter table, the held-out fit, notes."""
     out = []
@@ -775,6 +953,9 @@ def format_table(result: SysidResult) -> str:
         out.append(f"{st.name} stage: {len(st.logs)} run(s), {st.n_samples} samples, "
                    f"{st.iterations} IPOPT iterations ({st.status}), fit RMS {rms}")
         out.append("  runs: " + ", ".join(st.logs))
+        if st.noise:
+            out.append("  weighted by the residual noise, AR(1) (sd, correlation time): " + ", ".join(
+                f"{k} {_display(k, sd)} {tau:.2g} s" for k, (sd, tau) in st.noise.items()))
     out.append(f"scale: {result.anchor_note}")
     out.append("")
     has_truth = result.truth is not None
@@ -830,7 +1011,9 @@ def result_to_dict(result: SysidResult) -> dict:
             {"name": s.name, "logs": list(s.logs), "free": list(s.free), "samples": s.n_samples,
              "ipopt_iterations": s.iterations, "status": s.status, "cost": s.cost,
              "fit_rms": dict(s.rms), "build_s": s.build_s, "solve_s": s.solve_s,
-             "covariance_s": s.covariance_s, "passes": s.passes}
+             "covariance_s": s.covariance_s, "passes": s.passes,
+             "noise": {k: {"sd": sd, "correlation_time_s": clean(tau)}
+                       for k, (sd, tau) in s.noise.items()}}
             for s in result.stages
         ],
         "heldout": [

@@ -178,6 +178,32 @@ def test_the_link_lost_mid_run_fails_safe(boat, lake, tmp_path):
     assert b.autopilot.outputs == (0.0, 0.0)
 
 
+def test_a_loop_behind_the_clock_keeps_the_manoeuvre_timing_and_says_so(boat, lake, tmp_path):
+    """Each control step made 0.3 s late (a busy computer, a sped-up clock): the steering
+    still ramps at the actuator's 40 %/s of clock time (not 4 % per late step), and the late
+    steps are counted and reported."""
+    b = boat()
+    runs = (ZigzagRun("01_zigzag_20_50", 20.0, 50.0, 42.0, overshoots=1),)
+    session = b.session(lake, runs, tmp_path / "out", hold_s=2.0)
+    send = b.link.send_commands
+
+    def slow_send(*cmd):
+        send(*cmd)
+        b.clock.sleep(0.3)  # the autopilot runs on meanwhile
+
+    b.link.send_commands = slow_send
+    result = session.run()
+    assert result.exit_code == EXIT_GOAL, result
+    zig = read_log(result.paths[0])
+    t, nS = zig.time_s, np.abs(zig.commands[:, 1])
+    ramp_s = t[np.argmax(nS >= 49.0)] - t[np.argmax(nS > 1.0)]
+    assert ramp_s < 2.5, ramp_s  # 50 % at 40 %/s: 1.25 s and a late step (5 s before)
+    assert result.late_steps > 0.9 * result.steps and 0.15 < result.worst_late_s < 0.5
+    console = b.console.getvalue()
+    assert "control loop falls behind the clock" in console
+    assert f"{result.late_steps} of {result.steps} steps late" in console
+
+
 def test_coasting_distance_from_the_surge_equation():
     d = coast_distance_m(IDENTIFIED, 2.25, 0.2)
     assert 40.0 < d < 55.0  # the paper's boat coasts about 48 m from its top test speed

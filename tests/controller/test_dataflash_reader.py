@@ -158,10 +158,35 @@ def test_runs_are_found_in_a_long_log_or_cut_by_window(tmp_path, trajectory):
     t0, t1 = zig.time_s[0], zig.time_s[-1]
     (cut,) = cut_windows(log, [Window.parse(f"{t0}:{t1}", "heldout")])
     assert cut.maneuver == "sway-yaw" and cut.heldout and cut.n_samples == zig.n_samples
+    # a window ending where the next manoeuvre's steering begins is still a surge run: its
+    # last sample's command is the one after it, never applied within the window
+    k = int(np.flatnonzero(np.abs(log.commands[:, 1]) > 1.0)[0])
+    (edge,) = cut_windows(log, [Window(surge.time_s[0], float(log.time_s[k]))])
+    assert edge.maneuver == "surge" and abs(edge.commands[-1, 1]) > 1.0
     with pytest.raises(InputError, match=r"window 10000:20000 s holds no samples \(the log runs"):
         cut_windows(log, [Window(1e4, 2e4)])
     with pytest.raises(InputError, match="expected T0:T1"):
         Window.parse("12-30")
+
+
+def test_a_gap_in_a_zigzag_and_braking_before_a_staircase(tmp_path, trajectory):
+    """Nothing logged for 1.5 s inside the first zigzag (a stalled logger), reverse thrust on
+    the straight before the staircase: the zigzag is still found (not measured over the gap)
+    and the surge run holds no reverse thrust."""
+    t, states, commands = trajectory
+    zig0 = find_runs(read_dataflash(write_log(tmp_path / "a.BIN", trajectory)))[1]
+    gap0 = 0.5 * (zig0.time_s[0] + zig0.time_s[-1]) - 1.0  # trajectory time = log time - 1 s
+    keep = (t < gap0) | (t > gap0 + 1.5)
+    cmds = commands.copy()
+    cmds[(t > 2.0) & (t < 6.0), 0] = -20.0  # braking, then the staircase from rest
+    log = read_dataflash(write_log(tmp_path / "b.BIN", (t[keep], states[keep], cmds[keep])))
+    runs = find_runs(log)
+    assert [r.meta["maneuver"] for r in runs] == ["surge", "zigzag", "zigzag"]
+    surge, zig, _ = runs
+    assert surge.commands[:, 0].min() >= 0.0 and surge.time_s[0] > 7.0
+    assert zig.time_s[0] == pytest.approx(zig0.time_s[0]) and zig.n_samples == zig0.n_samples
+    missing = ~np.isfinite(zig.states[:, 0])
+    assert 10 <= missing.sum() <= 16  # the gap, not measured
 
 
 def test_sysid_reads_a_bin_log_from_the_command_line(tmp_path, trajectory, capsys):

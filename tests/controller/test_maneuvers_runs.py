@@ -95,3 +95,19 @@ def test_write_logs_names_files_after_runs(tmp_path, exact):
     paths = m.write_logs(tmp_path / "logs", exact)
     assert sorted(p.name for p in paths) == sorted(f"{k}.csv" for k in exact)
     assert math.isfinite(float(paths[0].read_text().splitlines()[-1].split(",")[0]))
+
+
+def test_overshoots_lengthen_the_fit_zigzag_only(exact):
+    from controller.errors import InputError
+
+    runs = m.with_overshoots(m.QUICK_RUNS, 6)
+    assert [r.overshoots for r in runs if isinstance(r, m.ZigzagRun)] == [6, 2]  # held-out kept
+    assert m.with_overshoots(m.QUICK_RUNS, None) == m.QUICK_RUNS
+    longer = m.generate(seed=3, noise="none", runs=(runs[2],))["03_zigzag_20_50"]
+    short = exact["03_zigzag_20_50"]
+    assert longer.time_s[-1] - longer.time_s[0] > 1.8 * (short.time_s[-1] - short.time_s[0])
+    reversals = np.count_nonzero(np.diff(np.sign(longer.commands[:, 1][longer.commands[:, 1] != 0])))
+    assert reversals >= 6
+    for bad in (0, 51, 2.5):
+        with pytest.raises(InputError, match="--overshoots"):
+            m.with_overshoots(m.QUICK_RUNS, bad)

@@ -150,3 +150,38 @@ def test_a_covariance_that_cannot_be_computed_is_unknown_not_a_traceback(monkeyp
     assert {"Xu", "Xuu", "c"} <= set(rows)
     assert all(math.isfinite(rows[n].estimate) for n in ("Xu", "Xuu", "c"))
     assert all(rows[n].std_error == math.inf for n in ("Xu", "Xuu", "c"))
+
+
+def test_the_noise_model_finds_an_ar1_residual():
+    """_estimate_noise on residuals that are AR(1) (rho 0.9, sigma_w 0.1) with a gap: the
+    correlation and the innovation's size come back, and the weight is 1/sigma_w^2 up to the
+    common scale."""
+    rng = np.random.default_rng(4)
+    n = 4000
+    e = np.zeros(n)
+    for k in range(1, n):
+        e[k] = 0.9 * e[k - 1] + 0.1 * rng.standard_normal()
+    white = 0.02 * rng.standard_normal(n)
+    t = 0.1 * np.arange(n)
+    states = np.zeros((n, 6))
+    states[:, 0], states[:, 5] = e, white  # x: AR(1), r: white
+    states[1000:1010, 0] = np.nan  # not measured there
+    log = m.ManeuverLog(t, states, np.zeros((n, 2)), {"maneuver": "zigzag"}, source="synthetic")
+    data = sysid._Data.of(log)
+    zero_traj = [np.zeros((6, n))]  # the "fit": residual = -measurement
+    noise = sysid._estimate_noise([data], zero_traj, list(range(6)),
+                                  np.array([1.0, 0, 0, 0, 0, 1.0]), cost=1.0)
+    assert set(noise) == {0, 5}
+    assert noise[0].rho == pytest.approx(0.9, abs=0.02)
+    assert noise[0].sigma_w == pytest.approx(0.1, rel=0.05)
+    assert noise[5].rho < 0.05 and noise[5].sigma_w == pytest.approx(0.02, rel=0.05)
+    assert noise[0].weight * noise[0].sigma_w**2 == pytest.approx(
+        noise[5].weight * noise[5].sigma_w**2)
+    assert noise[0].correlation_time(0.1) == pytest.approx(-0.1 / math.log(0.9), rel=0.2)
+
+
+def test_the_time_limit_stops_with_a_clear_error(logs):
+    with pytest.raises(sysid.SolverTimeLimit, match=r"time limit, 0.001 s of CPU.*--time-limit"):
+        sysid.identify(list(logs.values()), sysid.SysidConfig(max_cpu_s=1e-3))
+    with pytest.raises(InputError, match="--time-limit"):
+        sysid.SysidConfig(max_cpu_s=0.0)
