@@ -83,9 +83,14 @@ def _surge_runs(log: FlightLog) -> list[tuple[int, int, str]]:
     dt = float(np.median(np.diff(t)))
     out = []
     straight = _usable(log) & (np.abs(nS) <= STRAIGHT_PCT) & (nT >= 0.0)
+    turning = np.flatnonzero(~(np.abs(nS) <= STRAIGHT_PCT))  # (NaN counts as turning)
+    settle = int(round(SETTLE_S / dt))
     for a, b in _runs(straight):
-        if a > 0:  # after a turn: let sway and yaw die out first
-            a = min(b, a + int(round(SETTLE_S / dt)))
+        # SETTLE_S after the last turn, so that sway and yaw have died out (a stretch of
+        # reverse thrust between, braking straight ahead, counts toward it)
+        before = turning[turning < a]
+        if before.size:
+            a = min(b, max(a, int(before[-1]) + 1 + settle))
         if (b - a) * dt < MIN_SURGE_S:
             continue
         levels = nT[a:b]
