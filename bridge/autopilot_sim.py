@@ -335,20 +335,18 @@ class AutopilotSim:
 
     # -- the loop -------------------------------------------------------------------------
     def pump(self, now: float) -> None:
-        """Advance the physics to `now` with the outputs in force, then handle everything
-        received, log and send what is due.
+        """Handle everything received, advance the physics to `now`, send what is due.
 
-        `now` is clock time; the physics' time 0 is the clock's time at construction. A command
-        received now acts from now on, as the firmware's loop applies (and logs in RCOU) its
-        outputs when it reads them: the physics never runs a command before the log shows it."""
+        `now` is clock time; the physics' time 0 is the clock's time at construction."""
         if self._conn is None:
             return
-        self._advance(now - self._t0)
         if not self._initialised and self.boot_s >= self.init_s - 1e-9:
             self._finish_init()
         self._receive_all()
         if self._reboot_pending:
             self.restart()
+        self._outputs = self._compute_outputs()
+        self._advance(now - self._t0)
         self._outputs = self._compute_outputs()
         if self.ekf_origin is None and self.ekf_ready:
             self._set_ekf_origin()

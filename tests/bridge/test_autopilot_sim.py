@@ -555,28 +555,3 @@ def test_dataflash_log_as_ardupilot_writes_it(make_rig, tmp_path):
     rig.run(0.2)
     assert [p.name for p in rig.sim.log_paths] == ["00000001.BIN", "00000002.BIN"]
     assert (tmp_path / "logs" / "LASTLOG.TXT").read_text().strip() == "2"
-
-
-def test_a_command_acts_from_the_rcou_record_that_shows_it(make_rig, tmp_path):
-    """The physics runs each output from the moment the log shows it, never before: the
-    servo outputs in RCOU are what the actuators followed (what identification relies on)."""
-    from controller.pwm import CommandChannels
-
-    rig = make_rig(log_dir=tmp_path / "logs")
-    rig.arm()
-    actuator = []  # (boot time, steering actuator) after every pump
-    rig.clock.add_peer(lambda now: actuator.append((round(rig.sim.boot_s, 6),
-                                                    float(rig.sim.actuators[1]))))
-    rig.run(0.5)
-    rig.override(ch3=1700, ch1=1300)  # steering 54 % to port
-    rig.run(0.5)
-    got = _read_bin(rig.sim.log_paths[0])
-    servos = CommandChannels.from_servo_params({m.Name: m.Value for m in got["PARM"]})
-    rcou = [(round(m.TimeUS * 1e-6, 6), servos.to_commands({1: m.C1, 3: m.C3})[1])
-            for m in got["RCOU"]]
-    t_change = next(t for t, nS in rcou if nS > 1.0)
-    before = [a for t, a in actuator if t <= t_change + 1e-9]
-    after = [a for t, a in actuator if t > t_change + 1e-9]
-    assert before and after
-    assert max(abs(a) for a in before) < 1e-9  # not a step early
-    assert after[0] > 0.0  # and from the next physics step on
