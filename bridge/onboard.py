@@ -304,9 +304,7 @@ class OnboardLoop:
         self._actuators = np.zeros(2)
         self._tty = bool(getattr(console, "isatty", lambda: False)())
         self._status_shown = False
-        from controller.perception.pipeline import ScanPipeline
-
-        self.perception = ScanPipeline()  # detection, vessel tracking, cleaning, gaps
+        self.perception = _perception_for(lidar)  # detection, vessel tracking, cleaning, gaps
         import inspect
 
         takes = inspect.signature(controller.step).parameters  # an older controller takes
@@ -624,3 +622,13 @@ def run_bridge(options: BridgeOptions, console=sys.stderr) -> BridgeResult:
             viz.close()
         link.close()
         getattr(lidar, "close", lambda: None)()
+
+
+def _perception_for(lidar):
+    """The scan pipeline for a LiDAR source: free space judged from where its sensors sit
+    (`viewpoints`, when the source knows them), the own hull's returns kept as occluders."""
+    from controller.perception.pipeline import PipelineConfig, ScanPipeline
+    from controller.perception.tracking import TrackerConfig
+
+    viewpoints = tuple(getattr(lidar, "viewpoints", ()) or ())
+    return ScanPipeline(PipelineConfig(tracking=TrackerConfig(viewpoints=viewpoints)))

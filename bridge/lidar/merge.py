@@ -56,6 +56,13 @@ class MergedLidar:
     def name(self) -> str:
         return "+".join(t.sensor.spec for t in self.tracks)
 
+    @property
+    def viewpoints(self) -> tuple:
+        """(x_m, y_m, height_m) of each sensor in the body frame (z down: height = -z_m):
+        where the tracker judges free space from."""
+        return tuple((float(t.mount[0]), float(t.mount[1]), -float(t.mount[2]))
+                     for t in self.tracks)
+
     def scan(self, time_s: float, pose) -> np.ndarray | None:
         t = float(time_s)
         pose = np.asarray(pose, float).reshape(-1)

@@ -65,6 +65,11 @@ class ReplayLidarSource:
     def __len__(self) -> int:
         return len(self.paths)
 
+    @property
+    def viewpoints(self) -> tuple:
+        """The recording sensor's (x_m, y_m, height_m) in the body frame (see `MergedLidar`)."""
+        return ((float(self.offset[0]), float(self.offset[1]), -float(self.offset[2])),)
+
     def scan(self, time_s: float, pose=None) -> np.ndarray | None:
         i = bisect.bisect_right(self.times_s, float(time_s) + 1e-9) - 1
         if i < 0 or (i == len(self.paths) - 1 and time_s - self.times_s[i] > self.max_age_s):

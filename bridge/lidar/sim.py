@@ -24,6 +24,11 @@ class SimLidarSource:
         seed = scenario.seed if seed is None else int(seed)
         self.simulator = LidarSimulator(scenario.world, seed=seed * 7919 + 3)
 
+    @property
+    def viewpoints(self) -> tuple:
+        """(x_m, y_m, height_m) of each simulated unit in the body frame (see `MergedLidar`)."""
+        return tuple((m.x_m, m.y_m, m.height_m) for m in self.simulator.config.mounts)
+
     def scan(self, time_s: float, pose) -> np.ndarray:
         p = np.asarray(pose, float).reshape(-1)
         speed = float(p[3]) if len(p) > 3 else 0.0

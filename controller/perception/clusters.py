@@ -12,7 +12,7 @@
        may have cut it (the range square, the own hull's and wake's boxes), the segments
        through it, and its box on its longest segment (or principal axis)
     -> all of it in the inertial frame, with the pose, and the nearest return per bearing
-       (`free_space`: did the scan see through the water beyond an end?)
+       from each LiDAR (`free_space`: did the scan see through the water beyond an end?)
 
 A component longer than any vessel, or lying along a wall's line, is a piece of wall, not a
 detection. Points closer than `cell_m` * 2 are always in one cluster, points farther than
@@ -23,7 +23,8 @@ metres apart stay two.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -49,12 +50,42 @@ class Clusters:
     hulls: tuple
     cut: tuple
     walls: np.ndarray  # (M,) bool: which of the scan's segments were taken for walls
-    nearest: np.ndarray  # (bins,) nearest return per bearing bin from the boat (see free_space)
+    occluders: np.ndarray  # (N, 2) body-frame returns that can hide something (free_space)
     pose: tuple  # (x, y, psi) the cloud was placed with
     faces: tuple = ()
+    # Where the scan is seen from (`TrackerConfig.viewpoints`): (V, 3) body-frame x, y and
+    # height of each LiDAR (one row at the origin, height NaN: not known), the own hull's
+    # returns (H, 3) body-frame x, y, height, and the height a beam must reach over water.
+    viewpoints: np.ndarray = field(default_factory=lambda: np.array([[0.0, 0.0, np.nan]]))
+    hull_returns: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    band_top_m: float = 0.0
 
     def __len__(self) -> int:
         return len(self.count)
+
+    @cached_property
+    def nearest(self) -> np.ndarray:
+        """(V, bins) squared range of the nearest occluder per bearing bin seen from each
+        viewpoint (inf: none); made when `free_space` first asks (most scans never do)."""
+        return np.stack([_polar_ranges(self.occluders - v[:2]) if v[:2].any()
+                         else _polar_ranges(self.occluders) for v in self.viewpoints])
+
+    @cached_property
+    def hull_slope(self) -> np.ndarray:
+        """(V, bins) the steepest rise (height over range) of the own hull's returns per
+        bearing bin seen from each viewpoint (-inf: none): a sight line from the unit that
+        climbs less than this is cut by the hull (a cabin), one that climbs more passes over
+        (a deck below the unit)."""
+        out = np.full((len(self.viewpoints), _N_BINS), -np.inf)
+        h = self.hull_returns
+        for k, (vx, vy, vz) in enumerate(self.viewpoints.tolist()):
+            if len(h) and math.isfinite(vz):
+                dx, dy = h[:, 0] - vx, h[:, 1] - vy
+                r = np.hypot(dx, dy)
+                near = r > 1e-3
+                np.maximum.at(out[k], _bearing_bin(dx[near], dy[near]),
+                              (h[near, 2] - vz) / r[near])
+        return out
 
 
 def wall_segments(segments: np.ndarray, cfg: "TrackerConfig", known=None) -> np.ndarray:
@@ -145,11 +176,12 @@ def remember_walls(memory: np.ndarray, segments: np.ndarray, time_s: float,
 
 
 def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "TrackerConfig",
-                  known_walls=None, occluders=None) -> Clusters:
+                  known_walls=None, occluders=None, hull_returns=None) -> Clusters:
     """The clusters among cropped body-frame points `xy_body` (N, 2) that no wall segment
     (inertial (M, 4), from the same scan) explains, placed with `pose` (x, y, psi).
     `occluders` (K, 2): body-frame points of every return that can hide something (the crop
-    with a taller height band; default `xy_body`), for `free_space`.
+    with a taller height band; default `xy_body`), and `hull_returns` (H, 3) body-frame x, y
+    and height of the own hull's (when `cfg.viewpoints` places the LiDARs), for `free_space`.
     `known_walls` (K, 4+): wall lines of earlier scans (`remember_walls`); a segment or a
     cluster lying along one is that wall too."""
     import cv2
@@ -164,7 +196,6 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
     xy = xy_body
     if walls.any():
         xy = xy[~_on_walls(xy, segments[walls], (x0, y0, c, s), cfg)]
-    nearest = _polar_ranges(xy_body if occluders is None else occluders)
     r = det.range_m
     n = int(math.ceil(2 * r / cfg.cell_m))
     i = np.floor((xy[:, 0] + r) * (1.0 / cfg.cell_m)).astype(np.intp)
@@ -248,8 +279,19 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
     hulls = tuple(h @ rot + origin for h in hulls)
     edges = tuple(e @ rot for e in edges)
     return Clusters(centre, angle, np.asarray(from_side, bool), np.asarray(size, float).reshape(-1, 2),
-                    np.asarray(counts, int), hulls, tuple(edges), walls, nearest,
-                    (x0, y0, psi), tuple(faces))
+                    np.asarray(counts, int), hulls, tuple(edges), walls,
+                    xy_body if occluders is None else occluders, (x0, y0, psi), tuple(faces),
+                    *_viewpoints(cfg, hull_returns))
+
+
+def _viewpoints(cfg, hull_returns) -> tuple:
+    """Where the scan is seen from and what of the own hull is in the way (see Clusters):
+    the LiDARs (`cfg.viewpoints`), else the boat's origin with no hull."""
+    if getattr(cfg, "viewpoints", ()):
+        hull = np.zeros((0, 3)) if hull_returns is None else np.asarray(hull_returns, float)
+        return (np.asarray(cfg.viewpoints, float).reshape(-1, 3), hull.reshape(-1, 3),
+                float(cfg.detection.max_height_m))
+    return np.array([[0.0, 0.0, np.nan]]), np.zeros((0, 3)), 0.0
 
 
 def _along_wall(hull: np.ndarray, theta: float, lines: np.ndarray, frame, cfg) -> bool:
@@ -379,17 +421,29 @@ def _polar_ranges(xy: np.ndarray) -> np.ndarray:
 
 
 def free_space(found: Clusters, points, margin_m: float) -> np.ndarray:
-    """(K,) bool: the scan saw through each inertial point (K, 2): the nearest return at its
-    bearing lies more than `margin_m` beyond it, or there is none. A point just beyond a
+    """(K,) bool: the scan saw through each inertial point (K, 2): from one of its
+    viewpoints, the nearest return at its bearing lies more than `margin_m` beyond it, or
+    there is none, and the own hull does not cut the sight line to it. A point just beyond a
     cluster's end that is free says the end is the object's; one hidden behind a nearer
     return or lying on one (the same surface, out of the crop's band or between the beams'
-    rings) says the object may go on there."""
+    rings) says the object may go on there. Seen from the LiDARs themselves (`viewpoints`),
+    a wall's piece that ends where the cabin cuts a unit's view is not an object's end; seen
+    from the boat's origin, the bearing behind the cabin would look like open water."""
     x0, y0, psi = found.pose
     c, s = math.cos(psi), math.sin(psi)
     d = np.asarray(points, float).reshape(-1, 2) - (x0, y0)
     bx, by = c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]
-    reach = np.hypot(bx, by) + margin_m
-    return found.nearest[_bearing_bin(bx, by)] > reach * reach
+    nearest = found.nearest
+    free = np.zeros(len(bx), bool)
+    for k, (vx, vy, vz) in enumerate(found.viewpoints.tolist()):
+        ux, uy = bx - vx, by - vy
+        dist = np.hypot(ux, uy)
+        bins = _bearing_bin(ux, uy)
+        seen = nearest[k, bins] > (dist + margin_m) ** 2
+        if math.isfinite(vz) and len(found.hull_returns):  # the sight line to the band's top
+            seen &= found.hull_slope[k, bins] < (found.band_top_m - vz) / np.maximum(dist, 1e-3)
+        free |= seen  # (as from the origin, no return at a bearing counts as open water)
+    return free
 
 
 def _at_edge(hull: np.ndarray, cfg: "TrackerConfig") -> np.ndarray:

@@ -64,6 +64,12 @@ class TrackerConfig:
     occluder_top_m: float = 3.0  # returns up to this height hide what lies behind them
     free_step_m: float = 1.0  # an end is the object's if the scan saw through this far beyond
     free_margin_m: float = 0.5  # ... it (the nearest return there this much farther, or none)
+    # Where the LiDARs sit, (x_m, y_m, height_m above the water) in the body frame: free
+    # space is judged from each, the own hull's returns (in detection's hull box) cutting the
+    # sight lines they stand in (a bow unit does not see the water behind the cabin). ()
+    # when not known: judged from the boat's origin with the hull's box cropped out, where a
+    # bearing the hull shadows looks like open water.
+    viewpoints: tuple = ()
     # Filter.
     accel_sigma_mps2: float = 0.3  # white acceleration (small boats, erratic kayaks)
     meas_sigma_m: float = 0.1  # a seen end or side of a vessel
@@ -101,8 +107,9 @@ class TrackerConfig:
                              f"{type(self.detection).__name__}")
         counts = ("min_points", "confirm_hits", "confirm_window", "tentative_misses",
                   "max_misses", "moving_hits")
+        self._check_viewpoints()
         for f in fields(self):
-            if f.name == "detection":
+            if f.name in ("detection", "viewpoints"):
                 continue
             v = getattr(self, f.name)
             if f.name in counts:
@@ -114,6 +121,19 @@ class TrackerConfig:
                 raise InputError(f"tracker config: {f.name} must be a positive number, got {v!r}")
         if self.confirm_hits > self.confirm_window:
             raise InputError("tracker config: confirm_hits must not exceed confirm_window")
+
+    def _check_viewpoints(self) -> None:
+        try:
+            points = np.asarray(self.viewpoints, float)
+        except (TypeError, ValueError):
+            points = None
+        if points is None or not np.isfinite(points).all() or (
+                points.size and (points.ndim != 2 or points.shape[1] != 3)):
+            raise InputError(f"tracker config: viewpoints must be (x_m, y_m, height_m) rows "
+                             f"of finite numbers (the LiDARs in the body frame, height above "
+                             f"the water), got {self.viewpoints!r}")
+        unique = dict.fromkeys(map(tuple, points.reshape(-1, 3).tolist()))  # in order, once
+        object.__setattr__(self, "viewpoints", tuple(unique))
 
 
 @dataclass(frozen=True, eq=False)
@@ -392,8 +412,14 @@ class VesselTracker:
         occluders[:, 0] = x
         occluders[:, 1] = y
         band = (z <= -cfg.detection.min_height_m) & (z >= -cfg.detection.max_height_m)
+        hull = None
+        if cfg.viewpoints:  # the own hull's returns cut sight lines, but are no cluster
+            inside = _in_hull_box(x, y, cfg.detection)
+            if inside.any():
+                hull = np.column_stack([x[inside], y[inside], -z[inside]]).astype(float)
+                occluders, band = occluders[~inside], band[~inside]
         xy = occluders[band].astype(float)
-        found = find_clusters(xy, p, segs, cfg, self._walls, occluders)
+        found = find_clusters(xy, p, segs, cfg, self._walls, occluders, hull)
         self._walls = remember_walls(self._walls, segs[segs[:, 3] > cfg.max_vessel_length_m],
                                      t, cfg)
         self._associate(t, found, p)
@@ -501,8 +527,19 @@ def crop_for_tracker(points, config: TrackerConfig) -> np.ndarray:
 
 @lru_cache(maxsize=8)
 def _tracker_crop(config: TrackerConfig) -> DetectionConfig:
+    """Detection's crop up to `occluder_top_m`; with the LiDARs placed (`viewpoints`), the
+    own hull's box kept (its returns shadow what lies behind the hull)."""
     det = config.detection
-    return replace(det, max_height_m=max(det.max_height_m, config.occluder_top_m))
+    crop = replace(det, max_height_m=max(det.max_height_m, config.occluder_top_m))
+    if config.viewpoints:  # (the box along x stays: the wake's box starts at its end)
+        crop = replace(crop, hull_half_width_m=0.0)
+    return crop
+
+
+def _in_hull_box(x: np.ndarray, y: np.ndarray, det: DetectionConfig) -> np.ndarray:
+    """Body-frame points inside detection's own-hull box."""
+    x0, x1 = det.hull_x_m
+    return (x >= x0) & (x <= x1) & (np.abs(y) <= det.hull_half_width_m)
 
 
 # -- what a cluster measures -----------------------------------------------------------

@@ -69,6 +69,18 @@ class KnownWalls:
         return clip_segments_to_circle(a, b, np.asarray(true_state)[:2], self.range_m)
 
 
+def tracker_config(lidar_config=None, detection=None):
+    """The tracker's settings for the simulated suite: free space judged from where its units
+    sit (`TrackerConfig.viewpoints`), with the detection settings given."""
+    from controller.perception.detection import DEFAULT
+    from controller.perception.tracking import TrackerConfig
+    from scenarios.sensors.lidar import LidarConfig
+
+    mounts = (lidar_config or LidarConfig()).mounts
+    return TrackerConfig(detection=detection or DEFAULT,
+                         viewpoints=tuple((m.x_m, m.y_m, m.height_m) for m in mounts))
+
+
 class LidarPerception:
     """The simulated three-LiDAR scan at the true pose and time (obstacles removed by then are
     gone, vessels where they are), detected into segments placed with the estimated pose (so
@@ -92,9 +104,7 @@ class LidarPerception:
         self.tracker = None
         self.tracking = None  # the tracker's config (None: no tracking)
         if tracking is not False:
-            from controller.perception.tracking import TrackerConfig
-
-            self.tracking = tracking or TrackerConfig(detection=self.detection)
+            self.tracking = tracking or tracker_config(config, self.detection)
             if track_here:  # (else `track` runs in another process: `TrackingHalf`)
                 self.tracker = TrackingHalf(self.tracking)
         self.points_per_scan: list[int] = []

@@ -55,11 +55,9 @@ class DelayedLidarPerception:
         # detection, is still the larger), and the tracks are the same either way.
         self._tracking = None
         if tracking is not False:
-            from controller.perception.detection import DEFAULT
-            from controller.perception.tracking import TrackerConfig
-            from scenarios.sensors.perception import TrackingHalf
+            from scenarios.sensors.perception import TrackingHalf, tracker_config
 
-            self._tracking = TrackingHalf(tracking or TrackerConfig(detection=detection or DEFAULT))
+            self._tracking = TrackingHalf(tracking or tracker_config(config, detection))
         args = (world, seed, config, detection, tracking, False, cloud_points)
         if self.parallel:
             self._worker = _Worker(args)

@@ -126,15 +126,18 @@ def moving_sweep_grid(sim, state) -> np.ndarray:
     """The (1800, 16) grid of a sweep that starts at the boat's state (x, y, psi, u, v, r):
     the canal rendered at the start pose, each point then moved into the body frame of the
     moment its laser fires (the sweep's own motion, the constant twist the bridge's
-    de-skew undoes), so a moving boat's sweep is skewed as a real one is."""
+    de-skew undoes), so a moving boat's sweep is skewed as a real one is. The unit's returns
+    off the own cabin stay in the sweep, as a real unit's do (they move with the boat)."""
     from bridge.lidar.deskew import deskew
 
     state = np.asarray(state, float)
     scan = sim.scan_labelled(state[:3])
-    body = np.asarray(scan.points, float)[scan.labels != 5]
+    points = np.asarray(scan.points, float)
+    hull = scan.labels == 5
+    body = points[~hull]
     az = np.degrees(np.arctan2(body[:, 1] - BOW[1], body[:, 0] - BOW[0])) % 360.0
     fired = np.round(az / (vp.BLOCK_STEP_DEG / 2)) * vp.SEQUENCE_US * 1e-6  # s after the start
     # from the start's body frame to the one at each firing: the inverse of de-skewing a
     # point measured then back to the start
     moved = deskew(body, -fired, 0.0, state[3:6])
-    return vp.sweep_grid(vp.body_to_sensor_ros(moved, *BOW))
+    return vp.sweep_grid(vp.body_to_sensor_ros(np.vstack([moved, points[hull]]), *BOW))

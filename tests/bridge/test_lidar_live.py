@@ -153,11 +153,10 @@ def test_the_bridge_drives_the_short_bend_on_live_velodyne_packets(short_bend, t
     near = [float(r["nearest_segment_m"]) for r in steps if r["nearest_segment_m"] not in ("", "inf")]
     print(f"live velodyne drive: {len(steps)} steps, walls seen in {sum(seen)}, nearest wall "
           f"{min(near):.2f} m, tracks up to {max(int(r['tracks'] or 0) for r in steps)}")
-    # walls in every step until 25 m before the canal's end (x = 140 m); from there on (the
-    # last ~10 s) this lone bow unit's perception has reported none, the short wall stubs
-    # taken for 2-3 vessel tracks (the three simulated units of `sim` keep seeing walls)
-    along = [ok for ok, r in zip(seen, steps) if float(r["x_m"]) < 115.0]
-    assert all(along[5:]) and len(along) > 0.8 * len(steps)
+    # walls in every step to the canal's end: the short wall pieces of the last leg, whose
+    # near ends the cabin cuts from this lone bow unit's view, stay walls (free space judged
+    # from the unit, `TrackerConfig.viewpoints`), not vessel tracks moving with the boat
+    assert all(seen[5:]) and len(steps) > 500
     assert min(near) > 3.0
     assert loop.lidar.malformed == {"lidar": 0}
 

@@ -150,3 +150,19 @@ def test_a_scenario_lidar_table_is_checked_when_the_bridge_loads_it(tmp_path):
         scenario = load_scenario(path)  # loads: the table is the bridge's to check
         with pytest.raises(InputError, match=match):
             build_lidar(["sim"], None, scenario)
+
+
+def test_the_bridge_judges_free_space_from_where_its_sensors_sit():
+    """The merge tells where its sensors are (x, y and height, from the mounts' z down), the
+    simulated suite its units, and the bridge's tracker takes them as viewpoints."""
+    from bridge.lidar.sim import SimLidarSource
+    from bridge.onboard import _perception_for
+    from scenarios.scenario_file import load_scenario
+
+    merge = MergedLidar([FakeSensor("bow", 5.0), FakeSensor("stern", -5.0)],
+                        [BOW_MOUNT, (-3.0, 0.5, -2.0, 0.0, 0.0, 0.0)])
+    assert merge.viewpoints == ((3.5, 0.0, 1.3), (-3.0, 0.5, 2.0))
+    assert _perception_for(merge).tracker.config.viewpoints == merge.viewpoints
+    sim = SimLidarSource(load_scenario(ROOT / "scenarios" / "straight.toml"))
+    assert sim.viewpoints == ((3.5, 0.0, 1.3), (0.0, -1.35, 2.4), (0.0, 1.35, 2.4))
+    assert _perception_for(object()).tracker.config.viewpoints == ()  # none known: the origin

@@ -573,3 +573,68 @@ def test_bad_config_is_a_clear_error(field, value):
 def test_confirm_hits_within_the_window():
     with pytest.raises(InputError, match="confirm_window"):
         TrackerConfig(confirm_hits=6, confirm_window=5)
+
+
+# -- free space seen from the LiDARs themselves ---------------------------------------------
+def _bow_run(viewpoints, seconds=28.0):
+    """A lone 16-channel unit on the bow (3.5 m forward, 1.3 m up) along the last 30 m of a
+    canal after a bend: the walls it sees there are shorter than any vessel, and the cabin
+    behind the unit cuts off their near ends."""
+    from scenarios.sensors.lidar import LidarConfig, LidarMount
+
+    world = CanalWorld.from_centre_line([[0, 0], [70, 0], [100, 30], [130, 30]], 16.0)
+    bow = LidarMount("bow", 3.5, 0.0, 1.3, 16, elevation_min_rad=math.radians(-15),
+                     elevation_max_rad=math.radians(15), columns=1800)
+    sim = LidarSimulator(world, LidarConfig(mounts=(bow,)), seed=3)
+    tracker = VesselTracker(TrackerConfig(viewpoints=viewpoints))
+    moving, fewest = 0, math.inf
+    for k in range(int(seconds * RATE_HZ)):
+        t = k / RATE_HZ
+        pose = (100.0 + t, 30.0, 0.0)
+        pts = sim.scan(pose, 1.0, time_s=t)
+        out = tracker.update(t, pts, pose, detect_segments(pts, pose))
+        moving += any(tr.moving for tr in out.tracks)
+        fewest = min(fewest, len(out.static_segments))
+    return moving, fewest
+
+
+def test_a_bow_unit_placed_keeps_the_walls_its_cabin_cuts_off():
+    """Seen from the boat's origin, the water behind the cabin (no return there) looks open,
+    so the end of a wall where the cabin cuts the unit's view passes for a hull's end that
+    moves with the boat: the walls become vessels and, at times, no wall is left. Seen from
+    the unit, with the cabin's returns cutting its sight lines, fewer scans hold such a
+    track and a wall is always left."""
+    moving_origin, fewest_origin = _bow_run(())
+    moving_unit, fewest_unit = _bow_run(((3.5, 0.0, 1.3),))
+    assert fewest_origin == 0 and moving_origin > 150  # the premise: the fault shows
+    assert fewest_unit >= 1 and moving_unit < 0.6 * moving_origin
+
+
+def test_free_space_seen_from_a_unit_is_cut_by_a_cabin_not_by_a_deck_below_it():
+    """`free_space` from a viewpoint: a point behind a return standing above the sight line
+    (a cabin roof) is hidden, one behind returns below it (a deck) is seen, and from the
+    origin with no viewpoints the hull's returns are not in the way."""
+    from controller.perception.clusters import find_clusters, free_space
+
+    probe = np.array([[-20.0, 0.3]])  # 20 m astern, in the water
+    wall = np.array([[30.0, y] for y in np.linspace(-5.0, 5.0, 60)])  # something ahead
+    cabin = np.array([[x, y, 2.0] for x in np.linspace(-1.0, 1.0, 9)
+                      for y in np.linspace(-1.0, 1.0, 41)])
+    deck = cabin * (1.0, 1.0, 0.3)  # the same place, 0.6 m up
+    on_bow = TrackerConfig(viewpoints=((3.5, 0.0, 1.3),))
+    for hull, seen in ((cabin, False), (deck, True)):
+        found = find_clusters(wall, (0.0, 0.0, 0.0), np.zeros((0, 4)), on_bow, None, wall, hull)
+        assert free_space(found, probe, 0.5).tolist() == [seen]
+    found = find_clusters(wall, (0.0, 0.0, 0.0), np.zeros((0, 4)), TrackerConfig(), None, wall)
+    assert free_space(found, probe, 0.5).tolist() == [True]
+
+
+@pytest.mark.parametrize("value", [(1.0, 2.0), ((1.0, 2.0),), ((1.0, math.nan, 2.0),), "bow"])
+def test_viewpoints_must_be_rows_of_x_y_height(value):
+    with pytest.raises(InputError, match="viewpoints"):
+        TrackerConfig(viewpoints=value)
+
+
+def test_viewpoints_are_kept_once_each_in_order():
+    cfg = TrackerConfig(viewpoints=[[3.5, 0, 1.3], [0, 1.35, 2.4], [3.5, 0, 1.3]])
+    assert cfg.viewpoints == ((3.5, 0.0, 1.3), (0.0, 1.35, 2.4))
