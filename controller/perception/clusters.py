@@ -63,12 +63,14 @@ class Clusters:
     def __len__(self) -> int:
         return len(self.count)
 
-    @cached_property
-    def nearest(self) -> np.ndarray:
-        """(V, bins) squared range of the nearest occluder per bearing bin seen from each
-        viewpoint (inf: none); made when `free_space` first asks (most scans never do)."""
-        return np.stack([_polar_ranges(self.occluders - v[:2]) if v[:2].any()
-                         else _polar_ranges(self.occluders) for v in self.viewpoints])
+    def nearest(self, k: int) -> np.ndarray:
+        """(bins,) squared range of the nearest occluder per bearing bin seen from viewpoint
+        k (inf: none); made when `free_space` first asks (most scans never do)."""
+        images = self.__dict__.setdefault("_nearest", {})
+        if k not in images:
+            v = self.viewpoints[k, :2]
+            images[k] = _polar_ranges(self.occluders - v if v.any() else self.occluders)
+        return images[k]
 
     @cached_property
     def hull_slope(self) -> np.ndarray:
@@ -81,10 +83,15 @@ class Clusters:
         for k, (vx, vy, vz) in enumerate(self.viewpoints.tolist()):
             if len(h) and math.isfinite(vz):
                 dx, dy = h[:, 0] - vx, h[:, 1] - vy
-                r = np.hypot(dx, dy)
-                near = r > 1e-3
-                np.maximum.at(out[k], _bearing_bin(dx[near], dy[near]),
-                              (h[near, 2] - vz) / r[near])
+                r = np.maximum(np.hypot(dx, dy), 1e-3)
+                bins, slope = _bearing_bin(dx, dy), (h[:, 2] - vz) / r
+                # each return stands for its cell (HULL_CELL_M a side): the bins it spans
+                span = np.minimum(np.ceil(0.71 * HULL_CELL_M / r * (_N_BINS / (2 * math.pi))),
+                                  _MAX_SPAN).astype(np.intp)
+                count = 2 * span + 1  # bins - span .. bins + span, all at once
+                first = np.repeat(bins - span, count)
+                step = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+                np.maximum.at(out[k], (first + step) % _N_BINS, np.repeat(slope, count))
         return out
 
 
@@ -400,6 +407,8 @@ def _on_walls(xy: np.ndarray, walls: np.ndarray, frame, cfg: "TrackerConfig") ->
     return mask[i, j].astype(bool)
 
 
+HULL_CELL_M = 0.1  # the own hull's returns come as the highest one per cell this size
+_MAX_SPAN = 24  # bins: a cell 0.3 m from a unit spans 15 deg either side (more: the same)
 _N_BINS = 1440  # polar image: bins of a quarter degree (the beams: ~0.35 deg apart)
 
 
@@ -433,16 +442,17 @@ def free_space(found: Clusters, points, margin_m: float) -> np.ndarray:
     c, s = math.cos(psi), math.sin(psi)
     d = np.asarray(points, float).reshape(-1, 2) - (x0, y0)
     bx, by = c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]
-    nearest = found.nearest
     free = np.zeros(len(bx), bool)
     for k, (vx, vy, vz) in enumerate(found.viewpoints.tolist()):
         ux, uy = bx - vx, by - vy
         dist = np.hypot(ux, uy)
         bins = _bearing_bin(ux, uy)
-        seen = nearest[k, bins] > (dist + margin_m) ** 2
+        seen = found.nearest(k)[bins] > (dist + margin_m) ** 2
         if math.isfinite(vz) and len(found.hull_returns):  # the sight line to the band's top
             seen &= found.hull_slope[k, bins] < (found.band_top_m - vz) / np.maximum(dist, 1e-3)
         free |= seen  # (as from the origin, no return at a bearing counts as open water)
+        if free.all():
+            break  # (the other units' images are not needed)
     return free
 
 
