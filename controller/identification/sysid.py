@@ -18,8 +18,11 @@ residuals squared over sigma_w^2 (generalised least squares; Prais-Winsten at th
 measured stretch). An EKF's errors are coloured (position wandering over tens of seconds,
 velocity noise near the sway speed itself); with W the wandering position steers the fit, and
 whitened each channel counts for what it carries. Every solve shares one CPU-time budget
-(`max_cpu_s`, IPOPT's max_cpu_time; CPU, not wall time, so that a busy computer slows the
-identification without failing it): past it, a SolverTimeLimit says so, never a hang.
+(`max_cpu_s`; CPU, not wall time, so that a busy computer slows the identification without
+failing it): past it, a SolverTimeLimit says so, never a hang. IPOPT's own max_cpu_time is
+checked between iterations only, and one iteration of a solve gone astray can spend half an
+hour in MUMPS; so each solve runs in a forked child whose CPU time the kernel caps
+(RLIMIT_CPU) where the platform allows.
 
 One zigzag at one speed does not separate the quadratic and cross sway-yaw terms from the
 linear ones (with realistic noise their standard errors exceed their size, and fitting them
@@ -445,6 +448,57 @@ def _estimate_noise(datas: Sequence[_Data], trajectories, active: Sequence[int],
     return {c: _Noise(rho, sw, scale / sw**2) for c, (rho, sw) in found.items()}
 
 
+def cpu_time_s() -> float:
+    """CPU seconds of this process and of the solves' children it has waited for."""
+    import resource
+
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + kids.ru_utime + kids.ru_stime
+
+
+def solve_capped(solver, args: dict, limit_s: float) -> tuple[dict, dict]:
+    """`solver(**args)` (a CasADi nlpsol) and the stats sysid reads, in a forked child
+    killed by the kernel past `limit_s` CPU seconds (stats["capped"] then); in this process
+    where there is no fork."""
+    import multiprocessing as mp
+    import resource
+
+    keys = ("return_status", "iter_count", "success")
+    if "fork" not in mp.get_all_start_methods():
+        sol = solver(**args)
+        stats = solver.stats()
+        return {k: np.asarray(v) for k, v in sol.items()}, {k: stats.get(k) for k in keys}
+    ctx = mp.get_context("fork")
+    receive, send = ctx.Pipe(duplex=False)
+
+    def child() -> None:
+        seconds = max(int(math.ceil(limit_s)), 1)
+        resource.setrlimit(resource.RLIMIT_CPU, (seconds, seconds + 5))
+        try:
+            sol = solver(**args)
+            stats = solver.stats()
+            send.send(({k: np.asarray(v) for k, v in sol.items()},
+                       {k: stats.get(k) for k in keys}))
+        except BaseException as exc:  # noqa: BLE001 - handed to the parent as it is
+            send.send(exc)
+
+    worker = ctx.Process(target=child, daemon=True)
+    worker.start()
+    send.close()
+    try:
+        got = receive.recv()
+    except EOFError:  # the child died: past its CPU limit (SIGXCPU), or killed
+        got = None
+    worker.join()
+    receive.close()
+    if got is None:
+        return {}, {"return_status": "Maximum_CpuTime_Exceeded", "iter_count": None,
+                    "success": False, "capped": True}
+    if isinstance(got, BaseException):
+        raise got
+    return got
+
+
 class SolverTimeLimit(SolverError):
     """The identification ran out of its CPU-time budget (SysidConfig.max_cpu_s)."""
 
@@ -460,7 +514,7 @@ def _solve_stage(name: str, datas: Sequence[_Data], free: Sequence[str], start: 
     import casadi as ca
 
     t0 = time.perf_counter()
-    c0 = time.process_time()
+    c0 = cpu_time_s()
     limit = config.max_cpu_s if deadline is None else deadline - c0
     if limit <= 0:
         raise SolverTimeLimit(f"sysid {name} stage: the time limit, {config.max_cpu_s:g} s of "
@@ -517,15 +571,21 @@ def _solve_stage(name: str, datas: Sequence[_Data], free: Sequence[str], start: 
         "ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False,
         "show_eval_warnings": False,  # IPOPT backs off from a trial step that overflows
         "ipopt.max_iter": config.max_iter, "ipopt.tol": config.tol,
-        "ipopt.max_cpu_time": max(limit - (time.process_time() - c0), 1e-3),
+        "ipopt.max_cpu_time": max(limit - (cpu_time_s() - c0), 1e-3),
     }
     solver = ca.nlpsol("sysid_" + name.replace("-", "_"), "ipopt", nlp, opts)
     t1 = time.perf_counter()
-    sol = solver(x0=np.concatenate(w0), lbx=np.concatenate(lbw), ubx=np.concatenate(ubw),
-                 lbg=0, ubg=0)
+    sol, stats = solve_capped(solver, dict(x0=np.concatenate(w0), lbx=np.concatenate(lbw),
+                                           ubx=np.concatenate(ubw), lbg=0, ubg=0),
+                              limit - (cpu_time_s() - c0))
     t2 = time.perf_counter()
-    stats = solver.stats()
     status = str(stats.get("return_status", "?"))
+    if stats.get("capped"):
+        raise SolverTimeLimit(f"sysid {name} stage: the solve was stopped at the time limit, "
+                              f"{config.max_cpu_s:g} s of CPU for the whole identification, "
+                              "inside one IPOPT iteration (a solve that takes this long has "
+                              "usually gone astray from its start); raise it with "
+                              "--time-limit S")
     if status == "Maximum_CpuTime_Exceeded":
         raise SolverTimeLimit(f"sysid {name} stage: IPOPT stopped at the time limit, "
                               f"{config.max_cpu_s:g} s of CPU for the whole identification "
@@ -549,7 +609,7 @@ def _solve_stage(name: str, datas: Sequence[_Data], free: Sequence[str], start: 
         name=name, logs=tuple(d.log.source for d in datas), free=tuple(free),
         n_samples=int(sum(d.log.n_samples for d in datas)),
         iterations=int(stats.get("iter_count", -1)), status=status,
-        cost=float(sol["f"]), rms=rms, build_s=t1 - t0, solve_s=t2 - t1, covariance_s=t3 - t2,
+        cost=float(np.asarray(sol["f"]).reshape(-1)[0]), rms=rms, build_s=t1 - t0, solve_s=t2 - t1, covariance_s=t3 - t2,
         noise=_noise_report(noise, datas),
     )
     return _StageSolution(est, cov, info, report, x0s, trajs)
@@ -824,7 +884,7 @@ def identify(logs: Sequence[ManeuverLog], config: SysidConfig = SysidConfig()) -
         )
     stages, roles, se, det, dropped, failed = [], {}, {}, {}, {}, {}
     params = start
-    deadline = time.process_time() + config.max_cpu_s
+    deadline = cpu_time_s() + config.max_cpu_s
     for stage, stage_logs, free, weights in (
         ("surge", surge_logs, surge_free, config.surge_weights),
         ("sway-yaw", sway_logs, sway_free, config.sway_yaw_weights),

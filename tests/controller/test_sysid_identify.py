@@ -185,3 +185,38 @@ def test_the_time_limit_stops_with_a_clear_error(logs):
         sysid.identify(list(logs.values()), sysid.SysidConfig(max_cpu_s=1e-3))
     with pytest.raises(InputError, match="--time-limit"):
         sysid.SysidConfig(max_cpu_s=0.0)
+
+
+class _Burner:
+    """A stand-in for a CasADi solver: `seconds` of CPU (None: forever), then an answer."""
+
+    def __init__(self, seconds):
+        self.seconds = seconds
+
+    def __call__(self, **args):
+        import time
+
+        start = time.process_time()
+        while self.seconds is None or time.process_time() - start < self.seconds:
+            pass
+        return {"x": np.asarray(args["x0"]) + 1.0, "f": np.array([[2.5]])}
+
+    def stats(self):
+        return {"return_status": "Solve_Succeeded", "iter_count": 3, "success": True}
+
+
+def test_a_solve_is_capped_by_the_kernel_even_inside_an_iteration():
+    """IPOPT checks its max_cpu_time between iterations only; the child a solve runs in is
+    stopped by its CPU limit wherever it is (here a loop that never returns), and a solve
+    within its time comes back from the child with its answer and stats."""
+    import time
+
+    t0 = time.perf_counter()
+    sol, stats = sysid.solve_capped(_Burner(None), {"x0": np.zeros(3)}, 1.0)
+    assert stats["capped"] and stats["success"] is False and sol == {}
+    assert time.perf_counter() - t0 < 30.0  # (a generous bound: the machine may be busy)
+    c0 = sysid.cpu_time_s()
+    sol, stats = sysid.solve_capped(_Burner(0.2), {"x0": np.zeros(3)}, 10.0)
+    assert sol["x"].tolist() == [1.0, 1.0, 1.0] and float(sol["f"].ravel()[0]) == 2.5
+    assert stats == {"return_status": "Solve_Succeeded", "iter_count": 3, "success": True}
+    assert sysid.cpu_time_s() - c0 >= 0.2  # the child's CPU counts in the budget
