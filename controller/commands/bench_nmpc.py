@@ -34,8 +34,9 @@ def register_bench(sub) -> None:
     p.add_argument("--qp-tol", type=float, default=None,
                    help="HPIPM's residual tolerance for RTI and SQP (default: QpOptions')")
     p.add_argument("--vessel-steps", type=int, default=600,
-                   help="steps of the RTI runs with other vessels (an oncoming tour boat and a "
-                   "crossing launch), with the vessel slots and without them; 0 skips them")
+                   help="steps of the RTI runs with other vessels (a tour boat met port to "
+                   "port; one coming down the middle and a crossing launch), with the vessel "
+                   "slots and without them; 0 skips them")
     p.add_argument("--hpipm-build", default="auto", choices=("auto", "tuned", "casadi"),
                    help="HPIPM + BLASFEO for the direct interface: 'tuned' (the CPU's kernels, "
                    "from comma-deps-acados installed beside, see README), 'casadi' (its generic "
@@ -106,18 +107,23 @@ def _summary(run, label: str) -> dict:
 
 
 def _vessel_cases(config, qp, canal, x0, act0, args) -> dict:
-    """RTI on the same canal without vessel slots, with them and no vessel, and with them
-    and two vessels (one coming down the first leg, one crossing it), in one session; the
-    one-phase step (`split=False`), so that each case's time is its whole step."""
+    """RTI on the same canal without vessel slots, with them and no vessel, with them and a
+    tour boat meeting the boat on the first leg, keeping to its own starboard side (the two
+    pass port to port), and with them and two vessels that leave no room: a tour boat coming
+    down the middle of the first leg (the boat must back off before it for most of the run,
+    its clearance given up at many stages) and a launch crossing that leg; in one session,
+    the one-phase step (`split=False`), so that each case's time is its whole step."""
     from dataclasses import replace
 
     from controller.nmpc.bench import BenchVessel, closed_loop
     from controller.nmpc.controller import NmpcController
 
+    meeting = (BenchVessel(1, (45.0, -4.5), (-1.5, 0.0)),)
     vessels = (BenchVessel(1, (70.0, -3.0), (-1.5, 0.0)), BenchVessel(2, (25.0, 30.0), (0.0, -1.0),
                                                                        9.0, 3.0))
     cases = {"no_vessel_slots": (replace(config, vessel_slots=0), ()),
              "vessel_slots_no_vessels": (config, ()),
+             "vessel_slots_meeting": (config, meeting),
              "vessel_slots_two_vessels": (config, vessels)}
     out = {}
     for name, (cfg, vs) in cases.items():
@@ -128,14 +134,16 @@ def _vessel_cases(config, qp, canal, x0, act0, args) -> dict:
         s = _summary(run, "rti")
         out[name] = {k: s[k] for k in ("feedback_latency_ms", "preparation_ms", "mean_ms",
                                        "p99_ms", "max_ms", "cpu_ms",
-                                       "breakdown_mean_ms", "failed_steps", "fallback_steps",
-                                       "stopped_by_failure")}
+                                       "breakdown_mean_ms", "qp_iterations_mean",
+                                       "max_slack_m", "final_state", "failed_steps",
+                                       "fallback_steps", "stopped_by_failure")}
         out[name]["vessel_slots"] = cfg.vessel_slots
     base = out["no_vessel_slots"]["mean_ms"]
     out["ratio_mean_over_no_vessel_slots"] = {
         k: round(v["mean_ms"] / base, 2) for k, v in out.items() if k != "no_vessel_slots"}
-    two = out["vessel_slots_two_vessels"]
-    out["goal"] = {"mean_ms<=1": two["mean_ms"] <= 1.0, "p99_ms<=2": two["p99_ms"] <= 2.0}
+    out["goal"] = {name: {"mean_ms<=1": out[name]["mean_ms"] <= 1.0,
+                          "p99_ms<=2": out[name]["p99_ms"] <= 2.0}
+                   for name in ("vessel_slots_meeting", "vessel_slots_two_vessels")}
     return out
 
 

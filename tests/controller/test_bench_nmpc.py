@@ -22,3 +22,10 @@ def test_bench_nmpc_prints_times_ratios_and_the_goal(capsys):
     assert out["goal"]["rti_vs_sqp<=0.2m"] is True
     assert "ipopt/rti>=30" in out["goal"]  # False here: IPOPT did not run
     assert out["goal"]["ipopt/rti>=30"] is False
+    # the vessel cases: the tour boat met port to port is passed (the boat goes on round the
+    # bend), the one down the middle of the leg leaves no room and the boat backs off
+    vessels = out["vessels"]
+    meeting, blocking = vessels["vessel_slots_meeting"], vessels["vessel_slots_two_vessels"]
+    assert meeting["failed_steps"] == blocking["failed_steps"] == 0
+    assert meeting["final_state"][0] > 60.0 and blocking["final_state"][0] < 0.0
+    assert set(vessels["goal"]) == {"vessel_slots_meeting", "vessel_slots_two_vessels"}
