@@ -463,11 +463,14 @@ def solve_capped(solver, args: dict, limit_s: float) -> tuple[dict, dict]:
     import multiprocessing as mp
     import resource
 
-    keys = ("return_status", "iter_count", "success")
-    if "fork" not in mp.get_all_start_methods():
+    def answer() -> tuple[dict, dict]:
         sol = solver(**args)
         stats = solver.stats()
-        return {k: np.asarray(v) for k, v in sol.items()}, {k: stats.get(k) for k in keys}
+        return ({k: np.asarray(v) for k, v in sol.items()},
+                {k: stats.get(k) for k in ("return_status", "iter_count", "success")})
+
+    if "fork" not in mp.get_all_start_methods():
+        return answer()
     ctx = mp.get_context("fork")
     receive, send = ctx.Pipe(duplex=False)
 
@@ -475,10 +478,7 @@ def solve_capped(solver, args: dict, limit_s: float) -> tuple[dict, dict]:
         seconds = max(int(math.ceil(limit_s)), 1)
         resource.setrlimit(resource.RLIMIT_CPU, (seconds, seconds + 5))
         try:
-            sol = solver(**args)
-            stats = solver.stats()
-            send.send(({k: np.asarray(v) for k, v in sol.items()},
-                       {k: stats.get(k) for k in keys}))
+            send.send(answer())
         except BaseException as exc:  # noqa: BLE001 - handed to the parent as it is
             send.send(exc)
 
@@ -609,7 +609,8 @@ def _solve_stage(name: str, datas: Sequence[_Data], free: Sequence[str], start: 
         name=name, logs=tuple(d.log.source for d in datas), free=tuple(free),
         n_samples=int(sum(d.log.n_samples for d in datas)),
         iterations=int(stats.get("iter_count", -1)), status=status,
-        cost=float(np.asarray(sol["f"]).reshape(-1)[0]), rms=rms, build_s=t1 - t0, solve_s=t2 - t1, covariance_s=t3 - t2,
+        cost=float(sol["f"].reshape(-1)[0]), rms=rms, build_s=t1 - t0, solve_s=t2 - t1,
+        covariance_s=t3 - t2,
         noise=_noise_report(noise, datas),
     )
     return _StageSolution(est, cov, info, report, x0s, trajs)

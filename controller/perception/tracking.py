@@ -547,7 +547,7 @@ def _hull_tops(cloud: np.ndarray, config: TrackerConfig) -> np.ndarray:
     x, y, z = cloud[:, 0], cloud[:, 1], cloud[:, 2]
     x0, x1 = det.hull_x_m
     half = det.hull_half_width_m
-    m = np.flatnonzero((x >= x0) & (x <= x1) & (np.abs(y) <= half)
+    m = np.flatnonzero(_in_hull_box(x, y, det)
                        & (z >= -config.occluder_top_m) & (z <= -det.min_height_m))
     if not m.size:
         return np.zeros((0, 3), cloud.dtype)
