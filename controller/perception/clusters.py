@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -58,29 +59,33 @@ class Clusters:
     viewpoints: np.ndarray = field(default_factory=lambda: np.array([[0.0, 0.0, np.nan]]))
     hull_returns: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     band_top_m: float = 0.0
-    _images: dict = field(default_factory=dict, repr=False)  # (kind, k) -> image, on demand
 
     def __len__(self) -> int:
         return len(self.count)
 
-    def nearest(self, k: int) -> np.ndarray:
-        """(bins,) squared range of the nearest occluder per bearing bin seen from viewpoint
-        k (inf: none); made when `free_space` first asks (most scans never do)."""
-        key = ("nearest", k)
-        if key not in self._images:
-            v = self.viewpoints[k, :2]
-            self._images[key] = _polar_ranges(self.occluders - v if v.any() else self.occluders)
-        return self._images[key]
+    @cached_property
+    def nearest(self) -> np.ndarray:
+        """(V, bins) squared range of the nearest occluder per bearing bin seen from each
+        viewpoint (inf: none); made when `free_space` first asks (most scans never do)."""
+        return np.stack([_polar_ranges(self.occluders - v[:2]) if v[:2].any()
+                         else _polar_ranges(self.occluders) for v in self.viewpoints])
 
-    def hull_slope(self, k: int) -> np.ndarray:
-        """(bins,) the steepest rise (height over range) of the own hull's returns per
-        bearing bin seen from viewpoint k (-inf: none): a sight line from the unit that
+    @cached_property
+    def hull_slope(self) -> np.ndarray:
+        """(V, bins) the steepest rise (height over range) of the own hull's returns per
+        bearing bin seen from each viewpoint (-inf: none): a sight line from the unit that
         climbs less than this is cut by the hull (a cabin), one that climbs more passes over
-        (a deck below the unit). Made when `free_space` first asks."""
-        key = ("hull_slope", k)
-        if key not in self._images:
-            self._images[key] = _hull_slope(self.hull_returns, self.viewpoints[k])
-        return self._images[key]
+        (a deck below the unit)."""
+        out = np.full((len(self.viewpoints), _N_BINS), -np.inf)
+        h = self.hull_returns
+        for k, (vx, vy, vz) in enumerate(self.viewpoints.tolist()):
+            if len(h) and math.isfinite(vz):
+                dx, dy = h[:, 0] - vx, h[:, 1] - vy
+                r = np.hypot(dx, dy)
+                near = r > 1e-3
+                np.maximum.at(out[k], _bearing_bin(dx[near], dy[near]),
+                              (h[near, 2] - vz) / r[near])
+        return out
 
 
 def wall_segments(segments: np.ndarray, cfg: "TrackerConfig", known=None) -> np.ndarray:
@@ -395,8 +400,6 @@ def _on_walls(xy: np.ndarray, walls: np.ndarray, frame, cfg: "TrackerConfig") ->
     return mask[i, j].astype(bool)
 
 
-HULL_CELL_M = 0.1  # the own hull's returns come as the highest one per cell this size
-_MAX_SPAN = 24  # bins: a cell 0.3 m from a unit spans 15 deg either side (more: the same)
 _N_BINS = 1440  # polar image: bins of a quarter degree (the beams: ~0.35 deg apart)
 
 
@@ -417,26 +420,6 @@ def _polar_ranges(xy: np.ndarray) -> np.ndarray:
     return img
 
 
-def _hull_slope(hull: np.ndarray, viewpoint: np.ndarray) -> np.ndarray:
-    """`Clusters.hull_slope` for one viewpoint (x, y, height); -inf everywhere without a
-    hull or a height."""
-    out = np.full(_N_BINS, -np.inf)
-    vx, vy, vz = (float(v) for v in viewpoint)
-    if not len(hull) or not math.isfinite(vz):
-        return out
-    dx, dy = hull[:, 0] - vx, hull[:, 1] - vy
-    r = np.maximum(np.hypot(dx, dy), 1e-3)
-    bins, slope = _bearing_bin(dx, dy), (hull[:, 2] - vz) / r
-    # each return stands for its cell (HULL_CELL_M a side): the bins it spans
-    span = np.minimum(np.ceil(0.71 * HULL_CELL_M / r * (_N_BINS / (2 * math.pi))),
-                      _MAX_SPAN).astype(np.intp)
-    count = 2 * span + 1  # bins - span .. bins + span, all at once
-    first = np.repeat(bins - span, count)
-    step = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
-    np.maximum.at(out, (first + step) % _N_BINS, np.repeat(slope, count))
-    return out
-
-
 def free_space(found: Clusters, points, margin_m: float) -> np.ndarray:
     """(K,) bool: the scan saw through each inertial point (K, 2): from one of its
     viewpoints, the nearest return at its bearing lies more than `margin_m` beyond it, or
@@ -450,17 +433,16 @@ def free_space(found: Clusters, points, margin_m: float) -> np.ndarray:
     c, s = math.cos(psi), math.sin(psi)
     d = np.asarray(points, float).reshape(-1, 2) - (x0, y0)
     bx, by = c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]
+    nearest = found.nearest
     free = np.zeros(len(bx), bool)
     for k, (vx, vy, vz) in enumerate(found.viewpoints.tolist()):
         ux, uy = bx - vx, by - vy
         dist = np.hypot(ux, uy)
         bins = _bearing_bin(ux, uy)
-        seen = found.nearest(k)[bins] > (dist + margin_m) ** 2
+        seen = nearest[k, bins] > (dist + margin_m) ** 2
         if math.isfinite(vz) and len(found.hull_returns):  # the sight line to the band's top
-            seen &= found.hull_slope(k)[bins] < (found.band_top_m - vz) / np.maximum(dist, 1e-3)
+            seen &= found.hull_slope[k, bins] < (found.band_top_m - vz) / np.maximum(dist, 1e-3)
         free |= seen  # (as from the origin, no return at a bearing counts as open water)
-        if free.all():
-            break  # (the other units' images are not needed)
     return free
 
 

@@ -41,7 +41,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..geometry import wrap_angle
-from .clusters import HULL_CELL_M, Clusters, find_clusters, free_space, remember_walls
+from .clusters import Clusters, find_clusters, free_space, remember_walls
 from .detection import DEFAULT, DetectionConfig, crop_xy
 
 
@@ -403,25 +403,21 @@ class VesselTracker:
         # detection band of it is what the clusters are made of. (Columns one by one:
         # fast for the column-major clouds LiDAR drivers and the simulator deliver.) A
         # cropped cloud is that crop already (cropping it again keeps every point).
-        hull = None
         if cropped:
             x, y, z = cloud[:, 0], cloud[:, 1], cloud[:, 2]
-            if cfg.viewpoints:  # the crop's rows in the hull's box: its tops (_hull_tops)
-                inside = _in_hull_box(x, y, cfg.detection)
-                if inside.any():
-                    hull = cloud[inside]
-                    x, y, z = x[~inside], y[~inside], z[~inside]
         else:
             idx, x, y = crop_xy(cloud, self._occluder_crop)
             z = cloud[:, 2].take(idx)
-            if cfg.viewpoints:
-                hull = _hull_tops(cloud, cfg)
         occluders = np.empty((len(x), 2), cloud.dtype)
         occluders[:, 0] = x
         occluders[:, 1] = y
         band = (z <= -cfg.detection.min_height_m) & (z >= -cfg.detection.max_height_m)
-        if hull is not None:  # (x, y, z down) -> (x, y, height): what cuts the sight lines
-            hull = hull.astype(float) * (1.0, 1.0, -1.0)
+        hull = None
+        if cfg.viewpoints:  # the own hull's returns cut sight lines, but are no cluster
+            inside = _in_hull_box(x, y, cfg.detection)
+            if inside.any():
+                hull = np.column_stack([x[inside], y[inside], -z[inside]]).astype(float)
+                occluders, band = occluders[~inside], band[~inside]
         xy = occluders[band].astype(float)
         found = find_clusters(xy, p, segs, cfg, self._walls, occluders, hull)
         self._walls = remember_walls(self._walls, segs[segs[:, 3] > cfg.max_vessel_length_m],
@@ -522,45 +518,22 @@ class VesselTracker:
 
 def crop_for_tracker(points, config: TrackerConfig) -> np.ndarray:
     """The returns of a clean (N, 3) cloud that the tracker reads (detection's crop with a
-    taller height band: all of it can hide things), in the cloud's order, and with the
-    LiDARs placed (`viewpoints`) the own hull's tops after them (`_hull_tops`): what a
-    process that scans and detects sends to the one that tracks (`update(..., cropped=True)`)
+    taller height band: all of it can hide things), in the cloud's order: what a process
+    that scans and detects sends to the one that tracks (`update(..., cropped=True)`)
     instead of the whole cloud. Cropping twice gives the same points."""
     p = np.asarray(points)
-    crop = p[crop_xy(p, _tracker_crop(config))[0]]
-    if not config.viewpoints:
-        return crop
-    return np.concatenate([crop, _hull_tops(p, config)])
+    return p[crop_xy(p, _tracker_crop(config))[0]]
 
 
 @lru_cache(maxsize=8)
 def _tracker_crop(config: TrackerConfig) -> DetectionConfig:
+    """Detection's crop up to `occluder_top_m`; with the LiDARs placed (`viewpoints`), the
+    own hull's box kept (its returns shadow what lies behind the hull)."""
     det = config.detection
-    return replace(det, max_height_m=max(det.max_height_m, config.occluder_top_m))
-
-
-def _hull_tops(cloud: np.ndarray, config: TrackerConfig) -> np.ndarray:
-    """(K, 3) in the cloud's dtype: the highest return (up to `occluder_top_m`) in each
-    0.1 m cell of detection's own-hull box, at the cell's centre (z down): all that the
-    hull's shadow (`clusters.free_space`) needs of its returns, a tenth of them or fewer."""
-    det = config.detection
-    x, y, z = cloud[:, 0], cloud[:, 1], cloud[:, 2]
-    x0, x1 = det.hull_x_m
-    half = det.hull_half_width_m
-    m = np.flatnonzero(_in_hull_box(x, y, det)
-                       & (z >= -config.occluder_top_m) & (z <= -det.min_height_m))
-    if not m.size:
-        return np.zeros((0, 3), cloud.dtype)
-    ny = int(math.ceil(2 * half / HULL_CELL_M)) + 1
-    i = np.floor((x[m] - x0) * (1.0 / HULL_CELL_M)).astype(np.intp)
-    j = np.floor((y[m] + half) * (1.0 / HULL_CELL_M)).astype(np.intp)
-    top = np.full((int(i.max()) + 1) * ny, np.inf)
-    np.minimum.at(top, i * ny + j, z[m].astype(float))  # z down: the least is the highest
-    cells = np.flatnonzero(np.isfinite(top))
-    ci, cj = np.divmod(cells, ny)
-    out = np.column_stack([np.minimum(x0 + (ci + 0.5) * HULL_CELL_M, x1),
-                           np.minimum(-half + (cj + 0.5) * HULL_CELL_M, half), top[cells]])
-    return out.astype(cloud.dtype)
+    crop = replace(det, max_height_m=max(det.max_height_m, config.occluder_top_m))
+    if config.viewpoints:  # (the box along x stays: the wake's box starts at its end)
+        crop = replace(crop, hull_half_width_m=0.0)
+    return crop
 
 
 def _in_hull_box(x: np.ndarray, y: np.ndarray, det: DetectionConfig) -> np.ndarray:
