@@ -73,6 +73,7 @@ def _summary(run, label: str) -> dict:
         "feedback_latency_ms": _stats_ms([s.time_feedback_s for s in st]),
         "preparation_ms": _stats_ms([s.time_preparation_s for s in st]),
         "fed_back_steps": int(sum(s.fed_back for s in st)),
+        "set_up_in_preparation_steps": int(sum(s.set_up_in_preparation for s in st)),
         "mean_ms": round(float(t.mean()), 3),
         "p99_ms": round(float(np.percentile(t, 99)), 3),
         "max_ms": round(float(t.max()), 3),

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -58,6 +59,8 @@ class SolverStats:
     time_feedback_s: float = 0.0  # state in to command out (the feedback phase)
     time_preparation_s: float = 0.0  # the preparation of this step (done after a command)
     fed_back: bool = False  # the feedback used the prepared QP (False: linearised anew)
+    set_up_in_preparation: bool = False  # the reference, slots and gradient were the
+    # preparation's, made at the predicted state: the feedback only embedded the state
 
     @property
     def time_glue_s(self) -> float:
@@ -87,6 +90,71 @@ class NmpcStep:
     def max_slack_m(self) -> float:
         """The largest clearance given up over the horizon, in m (>= 0)."""
         return float(-self.slack_m.min()) if self.slack_m.size else 0.0
+
+
+def _moving(vessels) -> tuple:
+    """The tracks that take a vessel slot: a track not moving is an obstacle like a wall."""
+    return tuple(v for v in vessels if getattr(v, "moving", True))
+
+
+class _Inputs(NamedTuple):
+    """A step's inputs but the state: what a prepared setup was made from."""
+
+    segs: np.ndarray
+    vessels: tuple
+    path: WaypointPath
+    speed: float
+    current: np.ndarray
+    bias: np.ndarray
+    blind: bool
+
+    def same(self, other: "_Inputs") -> bool:
+        """The same inputs (the arrays equal, the vessels the same objects, the same path)."""
+        a, b = self.segs, other.segs
+        return (self.path is other.path and self.speed == other.speed
+                and self.blind == other.blind
+                and a.shape == b.shape and bool((a == b).all())
+                and len(self.vessels) == len(other.vessels)
+                and all(u is v for u, v in zip(self.vessels, other.vessels))
+                and bool((self.current == other.current).all())
+                and bool((self.bias == other.bias).all()))
+
+
+@dataclass
+class _Buffers:
+    """Arrays a step's setup is written into (two sets: the step's and the prepared one)."""
+
+    p: np.ndarray
+    w_ref: np.ndarray
+    lbw: np.ndarray
+    ubw: np.ndarray
+
+
+@dataclass
+class _Setup:
+    """A step set up for its solve (`NmpcController._setup`)."""
+
+    reference: Reference
+    selection: object  # segment_slots.SegmentSelection
+    stop: object  # passage.Stop | None
+    rules: Shaping
+    vessel_sel: object  # vessel_slots.VesselSelection
+    slack_ref: np.ndarray
+    p: np.ndarray
+    w_ref: np.ndarray
+    lbw: np.ndarray
+    ubw: np.ndarray
+    memory: tuple = ()  # the controller's memory after it (`NmpcController._memory`)
+
+
+@dataclass
+class _Prepared:
+    """A preparation: for which elapsed time, the shifted plan, and the step set up for it."""
+
+    elapsed_s: float
+    guess: np.ndarray
+    inputs: _Inputs
+    setup: _Setup
 
 
 def steady_throttle(speed_mps, boat) -> np.ndarray:
@@ -128,9 +196,11 @@ class NmpcController:
     """The paper's NMPC, solved by real-time iteration ("rti"), SQP to convergence ("sqp")
     or IPOPT ("ipopt"). `compiled` uses the cached C linearisation (RTI, SQP). `split`: RTI
     in two phases (`prepare` after each command, `feedback` when the state comes), on by
-    default: the answer is the one-phase step's (bit for bit on the bench and in
-    tests/controller/test_nmpc_blocked_way.py, where the way ahead opens), the command
-    leaves after the feedback alone; `split=False` does the whole step in `feedback`."""
+    default: the preparation sets the next step up at the state the plan predicts, so the
+    command leaves after the state's embedding and one QP; the answer is the one-phase
+    step's within the QP's tolerance (0.2 mm on the bench; it differs only where the
+    reference made at the predicted state differs from one made at the state given).
+    `split=False` does the whole step in `feedback`."""
 
     def __init__(self, config: NmpcConfig = NmpcConfig(), method: str = "rti",
                  qp: QpOptions = QpOptions(), compiled: bool = True, sqp_max_iter: int = 50,
@@ -183,9 +253,8 @@ class NmpcController:
         self._stages = np.arange(1, config.horizon + 1, dtype=float)
         self._widen_m = max(abs(o) for o in config.hull_offsets_m)
         self._shift_cache: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-        self._p = self._params.copy()
-        self._w_ref = np.zeros(self.ocp.nw)
-        self._lbw_step, self._ubw_step = self._lbw.copy(), self._ubw.copy()
+        self._buffers = [_Buffers(self._params.copy(), np.zeros(self.ocp.nw), self._lbw.copy(),
+                                  self._ubw.copy()) for _ in range(2)]
         self.reset()
 
     def reset(self) -> None:
@@ -199,7 +268,8 @@ class NmpcController:
         self._way.reset()
         self._rules_stop: Shaping | None = None
         self._rules_clear_s = 0.0
-        self._prepared: tuple[float, np.ndarray] | None = None  # (elapsed_s, guess)
+        self._prepared: _Prepared | None = None
+        self._inputs: _Inputs | None = None  # the last step's, for the next preparation
         self._slots_prev: np.ndarray | None = None
         self._slot_at: dict[tuple, int] = {}  # a segment (x_c, y_c, theta, length) -> its slot
         self._preparation_s = 0.0
@@ -217,25 +287,43 @@ class NmpcController:
                               current, elapsed_s, blind, bias, vessels)
         return self._output(*done, self.prepare())
 
-    def prepare(self, elapsed_s: float | None = None) -> float:
+    def prepare(self, elapsed_s: float | None = None, segments=None, vessels=None) -> float:
         """The preparation phase of the real-time iteration, right after a command is sent:
-        the plan shifted by `elapsed_s` (default: the control period; the next `feedback`
-        must be called with the same) linearised with this step's parameters and the QP set
-        up, so that the next `feedback` only embeds its state and solves. Returns its
-        seconds. Does nothing for SQP and IPOPT or before a first plan; a next step whose
-        segments, vessels, reference slots, current or bias differ from this one's is
-        linearised anew in its feedback (the answer never depends on the split)."""
+        for the state the plan predicts `elapsed_s` ahead (default: the control period; the
+        next `feedback` must be called with the same), everything the next step needs but
+        the state itself: the reference, the segment and vessel slots, the slack's reference,
+        the way ahead and the rules of the road, the linearisation and the QP. The next
+        `feedback` then embeds its state and solves, if it brings the same segments,
+        vessels, waypoints, speed, current, bias and blindness; otherwise it sets the step up
+        itself at its state (using the prepared linearisation where it still holds).
+        `segments`, `vessels`: perception newer than the last step's (a scan that arrived
+        after the command), for the preparation to use instead. Returns its seconds. Does
+        nothing for SQP and IPOPT or before a first plan."""
         t0 = time.perf_counter()
         self._prepared = None
-        if self.method != "rti" or self._plan is None:
+        if self.method != "rti" or self._plan is None or self._inputs is None:
             self._preparation_s = 0.0
             return 0.0
         c = self.config
         elapsed = c.control_period_s if elapsed_s is None else finite_number(elapsed_s,
                                                                              "elapsed_s")
         guess = self._shifted_plan(elapsed)
-        if self._qp.prepare(guess, self._p, self._lbw, self._ubw):
-            self._prepared = (elapsed, guess)
+        inputs = self._inputs
+        if segments is not None or vessels is not None:
+            inputs = _Inputs(np.array(check_segments(segments)) if segments is not None
+                             else inputs.segs,
+                             _moving(vessels) if vessels is not None else inputs.vessels,
+                             *inputs[2:])
+        x = guess[self._x0_at]
+        before = self._memory()
+        try:
+            setup = self._setup(x[:6], x[6:NX_BOAT], inputs, elapsed, guess,
+                                self._buffers[1])
+            setup.memory = self._memory()
+        finally:
+            self._restore(before)  # the step's own memory moves on only when it is used
+        if self._qp.prepare(guess, setup.p, self._lbw, self._ubw, setup.w_ref):
+            self._prepared = _Prepared(elapsed, guess, inputs, setup)
         self._preparation_s = time.perf_counter() - t0
         return self._preparation_s
 
@@ -269,7 +357,8 @@ class NmpcController:
                   current, elapsed_s, blind, bias, vessels) -> tuple:
         """The feedback up to the command; returns what `_output` needs (ends with whether the
         step used a preparation)."""
-        t0 = time.perf_counter(), time.thread_time()
+        cpu0 = time.thread_time()  # read outside the wall clock's window: a loaded machine
+        t0 = time.perf_counter()  # can take the CPU away in this system call
         c = self.config
         x = _finite_vector(state, 6, "state [x, y, psi, u, v, r]")
         act = _finite_vector(actuators, 2, "actuators [nT, nS]")
@@ -284,61 +373,55 @@ class NmpcController:
         elapsed = c.control_period_s if elapsed_s is None else finite_number(elapsed_s, "elapsed_s")
         if elapsed < 0:
             raise InputError(f"elapsed_s: must be a non-negative number of s, got {elapsed:g}")
+        # copies: a caller may refill its arrays in place for the next step
+        inputs = _Inputs(np.array(check_segments(segments)), _moving(vessels), self._path,
+                         speed, current.copy(), bias.copy(), bool(blind))
         prepared, self._prepared = self._prepared, None
-        if prepared is not None and prepared[0] == elapsed:
-            guess = prepared[1]
+        if prepared is not None and prepared.elapsed_s == elapsed:
+            guess = prepared.guess
         else:
             prepared, guess = None, self._shifted_plan(elapsed)
         if guess is not None:
             x[2] = _unwrap_near(float(x[2]), float(guess[self._x0_at[2]]))
-        segs = check_segments(segments)
-        vessels = tuple(v for v in vessels if getattr(v, "moving", True))
-        s, d = self._path.frame(x[None, :2], self._progress_m,
-                                self._progress_m + self.search_ahead_m)  # the boat on the path
-        stop = self._stop(float(s[0]), float(d[0]), x, segs, elapsed, bool(blind))
-        rules = self._rules(float(s[0]), float(d[0]), vessels, segs, speed, elapsed)
-        stop_at = None if stop is None else stop.at_m
-        if rules.stop_at_m is not None:
-            stop_at = rules.stop_at_m if stop_at is None else min(stop_at, rules.stop_at_m)
-        ref_speed = speed if rules.speed_mps is None else min(speed, rules.speed_mps)
-        reference = reference_trajectory(self._path, x[:2], x[2], ref_speed, c.horizon,
-                                         c.step_s, self._progress_m, self.search_ahead_m,
-                                         stop_at, c.stop_decel_mps2, current, rules.offset_m)
-        planned = reference.states[:, :2] if guess is None else guess[self._xy_at]
-        selection = select_checked(segs, x[:2], c.segment_slots, c.segment_range_m, planned)
-        slots = self._keep_slots(selection.slots)
-        vessel_sel = predict_vessels(vessels, c.vessel_slots, c.horizon, c.step_s, planned,
-                                     x[:2])
-        p = self._p  # filled in place: every part is written each step
-        lay = self._layout
-        p[lay.vessels] = vessel_sel.slots.reshape(-1)
-        p[lay.current] = current
-        p[lay.bias] = bias
-        p[lay.segments] = slots.reshape(-1)
         x_init = np.concatenate([x, act])
-        lbw, ubw = self._lbw_step, self._ubw_step
-        lbw[self._x0_boat] = ubw[self._x0_boat] = x_init
-        slack_ref = self._slack_reference(reference, speed, guess, x[:2], slots)
-        w_ref = self._w_ref
-        w_ref[self._ref_at] = reference.states
-        w_ref[self._slack_ref_at] = slack_ref
 
         fallback = ""
-        fed_back = False
-        if guess is None:
-            guess = self._safe_guess(x_init, reference, slack_ref)
-            result = self._solve(self._start_at(guess, x_init), p, w_ref, lbw, ubw)
-        else:
+        fed_back = set_up = False
+        from_safe_guess = guess is None  # no plan to start from: a retry would be the same
+        if prepared is not None and prepared.inputs.same(inputs):
+            # the step the preparation set up: only the state is new
+            setup, set_up = prepared.setup, True
+            self._restore(setup.memory)
+            self._buffers.reverse()  # its buffers are now the step's; the next prepare
+            # writes into the others
+            setup.lbw[self._x0_boat] = setup.ubw[self._x0_boat] = x_init
             start = self._start_at(guess, x_init)
-            if prepared is not None and self._qp.can_feed_back(start, p):
-                result, fed_back = self._feed_back(start, p, w_ref, lbw, ubw), True
+            if self._qp.can_feed_back(start, setup.p):
+                result, fed_back = self._feed_back(start, setup.p, None, setup.lbw,
+                                                   setup.ubw), True
             else:
-                result = self._solve(start, p, w_ref, lbw, ubw)
-            if not result.ok:
-                retry = self._solve(self._safe_guess(x_init, reference, slack_ref), p, w_ref,
-                                    lbw, ubw)
-                result = self._merge(result, retry)
-                fallback = "safe_guess" if retry.ok else ""
+                result = self._solve(start, setup.p, setup.w_ref, setup.lbw, setup.ubw)
+        else:
+            setup = self._setup(x, act, inputs, elapsed, guess, self._buffers[0])
+            setup.lbw[self._x0_boat] = setup.ubw[self._x0_boat] = x_init
+            if guess is None:
+                guess = self._safe_guess(x_init, setup.reference, setup.slack_ref)
+                result = self._solve(self._start_at(guess, x_init), setup.p, setup.w_ref,
+                                     setup.lbw, setup.ubw)
+            else:
+                start = self._start_at(guess, x_init)
+                if prepared is not None and self._qp.can_feed_back(start, setup.p):
+                    result, fed_back = self._feed_back(start, setup.p, setup.w_ref, setup.lbw,
+                                                       setup.ubw), True
+                else:
+                    result = self._solve(start, setup.p, setup.w_ref, setup.lbw, setup.ubw)
+        self._inputs = inputs
+        p, w_ref, lbw, ubw, reference = setup.p, setup.w_ref, setup.lbw, setup.ubw, setup.reference
+        if not result.ok and not from_safe_guess:
+            retry = self._solve(self._safe_guess(x_init, reference, setup.slack_ref), p, w_ref,
+                                lbw, ubw)
+            result = self._merge(result, retry)
+            fallback = "safe_guess" if retry.ok else ""
         if result.ok:
             self.consecutive_failures = 0
             self._solved = True
@@ -357,11 +440,59 @@ class NmpcController:
         self._plan = plan
         self._progress_m = reference.progress_m
         command = self._command(plan, act)  # what leaves now: the feedback ends here
-        times = time.perf_counter() - t0[0], time.thread_time() - t0[1]
-        return (plan, command, reference, result, fallback, times, selection, stop,
-                vessel_sel, rules, fed_back, prepared is not None)
+        wall = time.perf_counter() - t0
+        times = wall, time.thread_time() - cpu0
+        return (plan, command, reference, result, fallback, times, setup.selection,
+                setup.stop, setup.vessel_sel, setup.rules, fed_back, set_up,
+                prepared is not None)
 
     # -- pieces -----------------------------------------------------------------------------
+    def _setup(self, x: np.ndarray, act: np.ndarray, inputs: "_Inputs", elapsed: float,
+               guess: np.ndarray | None, buffers: "_Buffers") -> "_Setup":
+        """Everything a step sets up before its solve, for a boat at x with actuators act: the
+        way ahead, the rules, the reference, the slots, the parameters, the bounds and the
+        slack's reference, written into `buffers`. Moves the step's memory on (progress
+        search, way ahead, rules, slots)."""
+        c = self.config
+        segs, vessels, speed = inputs.segs, inputs.vessels, inputs.speed
+        s, d = self._path.frame(x[None, :2], self._progress_m,
+                                self._progress_m + self.search_ahead_m)  # the boat on the path
+        stop = self._stop(float(s[0]), float(d[0]), x, segs, elapsed, inputs.blind)
+        rules = self._rules(float(s[0]), float(d[0]), vessels, segs, speed, elapsed)
+        stop_at = None if stop is None else stop.at_m
+        if rules.stop_at_m is not None:
+            stop_at = rules.stop_at_m if stop_at is None else min(stop_at, rules.stop_at_m)
+        ref_speed = speed if rules.speed_mps is None else min(speed, rules.speed_mps)
+        reference = reference_trajectory(self._path, x[:2], x[2], ref_speed, c.horizon,
+                                         c.step_s, self._progress_m, self.search_ahead_m,
+                                         stop_at, c.stop_decel_mps2, inputs.current,
+                                         rules.offset_m)
+        planned = reference.states[:, :2] if guess is None else guess[self._xy_at]
+        selection = select_checked(segs, x[:2], c.segment_slots, c.segment_range_m, planned)
+        slots = self._keep_slots(selection.slots)
+        vessel_sel = predict_vessels(vessels, c.vessel_slots, c.horizon, c.step_s, planned,
+                                     x[:2])
+        p, lay = buffers.p, self._layout  # filled in place: every part is written each step
+        p[lay.vessels] = vessel_sel.slots.reshape(-1)
+        p[lay.current] = inputs.current
+        p[lay.bias] = inputs.bias
+        p[lay.segments] = slots.reshape(-1)
+        slack_ref = self._slack_reference(reference, speed, guess, x[:2], slots)
+        w_ref = buffers.w_ref
+        w_ref[self._ref_at] = reference.states
+        w_ref[self._slack_ref_at] = slack_ref
+        return _Setup(reference, selection, stop, rules, vessel_sel, slack_ref, p, w_ref,
+                      buffers.lbw, buffers.ubw)
+
+    def _memory(self) -> tuple:
+        """What `_setup` moves on, to be put back when a prepared setup goes unused."""
+        return (self._way.memory(), self._rules_stop, self._rules_clear_s, self._slots_prev,
+                self._slot_at)
+
+    def _restore(self, memory: tuple) -> None:
+        way, self._rules_stop, self._rules_clear_s, self._slots_prev, self._slot_at = memory
+        self._way.restore(way)
+
     def _rules(self, s: float, d: float, vessels, segments, speed_mps: float,
                elapsed_s: float) -> Shaping:
         """What the rules of the road ask of the reference for these vessels (`seamanship`).
@@ -595,7 +726,8 @@ class NmpcController:
 
     def _output(self, plan, command, reference, result: SqpResult, fallback: str,
                 times: tuple[float, float], selection, stop, vessel_sel, rules,
-                fed_back: bool, prepared: bool, preparation_s: float) -> NmpcStep:
+                fed_back: bool, set_up: bool, prepared: bool,
+                preparation_s: float) -> NmpcStep:
         """The step as the caller gets it: `times` are the feedback's (wall, CPU), the
         preparation's seconds (the one before this feedback, or with `split` the one after)
         count in the step's total."""
@@ -611,7 +743,8 @@ class NmpcController:
             command_clipped=clipped, waiting="" if stop is None else stop.reason,
             blocked_at_m=None if stop is None else stop.blocked_at_m,
             vessels=vessel_sel.ids, vessels_dropped=vessel_sel.dropped,
-            rules=rules.reason, fed_back=fed_back, time_feedback_s=times[0],
+            rules=rules.reason, fed_back=fed_back, set_up_in_preparation=set_up,
+            time_feedback_s=times[0],
             time_preparation_s=preparation_s)
         return NmpcStep(command, rates, plan[self._states_boat_at], plan[self._inputs_rates_at],
                         plan[self._slack_ref_at], reference, stats)

@@ -153,6 +153,13 @@ class WayAhead:
         self._blind_stop_m: float | None = None
         self._since_sweep = None  # s since the last sweep (None: sweep now)
 
+    def memory(self) -> tuple:
+        """What `update` moves on, to put back with `restore` (all of it immutable)."""
+        return self._stop, self._clear_s, self._blind_stop_m, self._since_sweep
+
+    def restore(self, memory: tuple) -> None:
+        self._stop, self._clear_s, self._blind_stop_m, self._since_sweep = memory
+
     def update(self, path: WaypointPath, progress_m: float, offset_m: float, speed_mps: float,
                segments, blind: bool, period_s: float, lookahead_m: float) -> Stop | None:
         """The stop to make this period, or None to go on."""

@@ -209,9 +209,11 @@ class QpStep:
         return dw.copy(), status == 0, STATUS.get(status, str(status)), iterations
 
     # -- the real-time iteration split: preparation, then feedback ---------------------------
-    def prepare(self, w: np.ndarray, p: np.ndarray, lbw: np.ndarray, ubw: np.ndarray) -> bool:
+    def prepare(self, w: np.ndarray, p: np.ndarray, lbw: np.ndarray, ubw: np.ndarray,
+                w_ref: np.ndarray | None = None) -> bool:
         """Linearise at the guess w (x_0 there is the predicted state) with parameters p and
-        set up the QP but for stage 0's dynamics and the gradient. False when the QP solver
+        set up the QP but for stage 0's dynamics, and the gradient if w_ref is given (it
+        does not depend on x_0: stage 0 has no state in the QP). False when the QP solver
         does not split (CasADi's conic ones): `feedback` then does everything."""
         if self._solve != self._solve_hpipm:
             return False
@@ -223,6 +225,9 @@ class QpStep:
         # first move could break its rate limits once the plan changed enough (a way that
         # opens: the prepared QP failed where the one-phase step did not)
         self.qp.set(SET_BOUNDS, 0, 1)
+        if w_ref is not None:
+            self._set_gradient(w, w_ref)
+            self.qp.set(SET_GRADIENT)
         self.prepared = True
         return True
 
@@ -235,10 +240,12 @@ class QpStep:
         dyn = self._dyn_p
         return bool((w[NX:] == self._hl_w[NX:]).all() and (p[dyn] == self._hl_p[dyn]).all())
 
-    def feedback(self, w: np.ndarray, p: np.ndarray, w_ref: np.ndarray) -> QpStepResult:
+    def feedback(self, w: np.ndarray, p: np.ndarray,
+                 w_ref: np.ndarray | None) -> QpStepResult:
         """The QP prepared at w but for x_0: stage 0 linearised at the new x_0 (as `solve`
         does), the obstacle rows anew if p's segments or vessels changed, the gradient from
-        w_ref, one solve: the QP `solve` would set up. Needs `can_feed_back(w, p)`."""
+        w_ref (None: the one `prepare` set), one solve: the QP `solve` would set up. Needs
+        `can_feed_back(w, p)`."""
         t0 = time.perf_counter()
         if not (p == self._hl_p).all():
             self._hl_p[:] = p
@@ -249,9 +256,12 @@ class QpStep:
         w.take(self._x1_at, out=self._fs_x1)
         self._fs()
         t1 = time.perf_counter()
-        self._set_gradient(w, w_ref)
-        self.qp.set(SET_DYNAMICS | SET_GRADIENT, 0, 1)
-        self.qp.set(SET_GRADIENT, 1)
+        if w_ref is None:
+            self.qp.set(SET_DYNAMICS, 0, 1)
+        else:
+            self._set_gradient(w, w_ref)
+            self.qp.set(SET_DYNAMICS | SET_GRADIENT, 0, 1)
+            self.qp.set(SET_GRADIENT, 1)
         self.prepared = False  # stage 0 and the gradient are now this state's
         dw, ok, status, iterations = self._hpipm_result()
         t2 = time.perf_counter()
