@@ -415,6 +415,9 @@ class OnboardLoop:
         if not np.all(np.isfinite(command)):
             return f"controller failed: command {command.tolist()} is not a number"
         pwm = link.send_commands(*command)
+        prepare = getattr(self.controller, "prepare", None)
+        if prepare is not None:  # the command is out: prepare the next step now
+            prepare()
         self._actuators = command
         self._tell_waiting(t, str(decision.stats.get("waiting", "")))
         m = link.rc_mapping

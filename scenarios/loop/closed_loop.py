@@ -159,6 +159,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
     encounters = EncounterWatch(cfg.vessels)
     tracking = TrackingWatch(cfg.vessels)
     perceive = getattr(perception, "perceive", None) or perception.segments
+    prepare = getattr(controller, "prepare", None)  # an NMPC's preparation phase
     wall0 = time.perf_counter()
     with RunLog(out_dir / "log.csv", out_dir / "segments.csv") as log:
         imu_k = 0
@@ -190,12 +191,17 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
             solve_s.append(t2 - t1)
             if decision.stats.get("feedback_s") is not None:  # the NMPC's two phases
                 phases.append((decision.stats["feedback_s"], decision.stats["preparation_s"],
-                               decision.stats["nmpc_step_s"], decision.stats["fed_back"]))
+                               decision.stats["nmpc_step_s"], decision.stats["fed_back"],
+                               decision.stats.get("set_up_in_preparation", False)))
             if not decision.ok:
                 status = f"controller failed: {decision.status}"
                 command = np.zeros(2)
             else:
                 command = np.clip(np.asarray(decision.command, float).reshape(2), -100, 100)
+            if prepare is not None:  # the command is out: the controller's next step
+                tp = time.perf_counter()  # is prepared off the state-to-command path
+                prepare()
+                timer.add("controller", time.perf_counter() - tp)
             prev = rows_cmd[-1] if rows_cmd else np.zeros(2)
             rate = (command - prev) / cfg.control_period_s
             clear = clearance.of(out.state)
@@ -339,6 +345,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
             ph = metrics.TimingStats.of([row[i] for row in phases])
             timing[key] = {"mean": ph.mean_ms, "p99": ph.p99_ms, "max": ph.max_ms}
         timing["fed_back_steps"] = int(sum(row[3] for row in phases))
+        timing["set_up_in_preparation_steps"] = int(sum(row[4] for row in phases))
     behind = getattr(perception, "time_s", None)  # the LiDAR's own time, maybe on another core
     if behind is not None:
         timing["perception"] = {

@@ -68,6 +68,7 @@ class NmpcController:
         self._waypoints = scenario.waypoints
         self._speed = scenario.target_speed_mps
         self._field = scenario.current_field
+        self._prepare = False  # a preparation is due (after a step, until done)
         self.estimator = WaterEstimator(WaterEstimatorConfig(
             period_s=config.control_period_s, boat=scenario.controller_params))
 
@@ -83,12 +84,14 @@ class NmpcController:
             current, bias = self._field.at(np.asarray(state)[:2]), (0.0, 0.0, 0.0)
         else:
             current, bias = (0.0, 0.0), (0.0, 0.0, 0.0)
+        self.prepare()  # if the loop did not, after the last command
         try:
-            st = self.core.step(state, actuators, segments, self._waypoints, self._speed,
-                                current, blind=blind, bias=bias, vessels=vessels)
+            st = self.core.feedback(state, actuators, segments, self._waypoints, self._speed,
+                                    current, blind=blind, bias=bias, vessels=vessels)
         except SolverError as exc:
             return Decision(command=np.zeros(2), ok=False, status=str(exc),
                             stats={"water": water, "estimator_s": estimator_s})
+        self._prepare = self.core.split  # the next step's preparation is due
         return Decision(
             command=st.command, status=_status(st), predicted=st.states,
             slack_m=st.max_slack_m, segments_used=segments,
@@ -97,8 +100,18 @@ class NmpcController:
                    "water": water, "estimator_s": estimator_s, "rules": st.stats.rules,
                    "feedback_s": st.stats.time_feedback_s,
                    "preparation_s": st.stats.time_preparation_s,
-                   "nmpc_step_s": st.stats.time_total_s, "fed_back": st.stats.fed_back},
+                   "nmpc_step_s": st.stats.time_total_s, "fed_back": st.stats.fed_back,
+                   "set_up_in_preparation": st.stats.set_up_in_preparation},
         )
+
+
+    def prepare(self) -> None:
+        """The NMPC's preparation for the next step (`NmpcController.prepare`): for the loop
+        to call once the command has gone out, so that the next step's state-in to
+        command-out is the feedback alone. A step that finds it not done does it first."""
+        if self._prepare:
+            self._prepare = False
+            self.core.prepare()
 
 
 def _status(st) -> str:
