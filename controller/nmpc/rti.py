@@ -244,10 +244,10 @@ class QpStep:
                  w_ref: np.ndarray | None) -> QpStepResult:
         """The QP prepared at w but for x_0: stage 0 linearised at the new x_0 (as `solve`
         does), the obstacle rows anew if p's segments or vessels changed, the gradient from
-        w_ref (None: the one `prepare` set), one solve: the QP `solve` would set up. Needs
-        `can_feed_back(w, p)`."""
+        w_ref (None: the one `prepare` set, and p the one it was given), one solve: the QP
+        `solve` would set up. Needs `can_feed_back(w, p)`."""
         t0 = time.perf_counter()
-        if not (p == self._hl_p).all():
+        if w_ref is not None and not (p == self._hl_p).all():
             self._hl_p[:] = p
             self._cl()
             self.qp.set(SET_CONSTRAINTS, 1)
