@@ -425,3 +425,20 @@ def test_a_step_set_up_in_the_preparation_only_embeds_its_state():
         act = b.command
     print(f"\nprepared setup vs one-phase: plans apart by at most {worst:.2f} x the stray")
     assert worst < 2.0
+
+
+def test_a_scan_handed_to_the_preparation_lets_the_feedback_only_embed_the_state():
+    """Segments that arrive after the command go into `prepare(segments=...)`: the next
+    feedback with them is set up already; without them it sets itself up."""
+    canal = straight_canal(width_m=20.0)
+    segs = canal.segments()
+    newer = segs[:-1]  # a scan later: one piece fewer
+    for handed in (False, True):
+        ctl = NmpcController(CFG)
+        ctl.feedback(X0, ACT0, segs, canal.waypoints, 2.0)
+        ctl.prepare(segments=newer if handed else None)
+        step = ctl.feedback(X0 + [0.2, 0, 0, 0, 0, 0], ACT0, newer, canal.waypoints, 2.0)
+        assert step.stats.ok and step.stats.fed_back
+        assert step.stats.set_up_in_preparation == handed
+    with pytest.raises(InputError, match="segments"):
+        ctl.prepare(segments=np.zeros((2, 3)))
