@@ -158,7 +158,7 @@ class _Prepared:
     elapsed_s: float
     guess: np.ndarray
     inputs: _Inputs
-    setup: _Setup
+    setup: _Setup | None  # None: only linearised (the inputs change every step)
 
 
 def steady_throttle(speed_mps, boat) -> np.ndarray:
@@ -275,6 +275,8 @@ class NmpcController:
         self._rules_clear_s = 0.0
         self._prepared: _Prepared | None = None
         self._inputs: _Inputs | None = None  # the last step's, for the next preparation
+        self._steady = False  # the last step's inputs were the ones before it
+        self._last_p: np.ndarray | None = None  # the last step's parameters
         self._slots_prev: np.ndarray | None = None
         self._slot_at: dict[tuple, int] = {}  # a segment (x_c, y_c, theta, length) -> its slot
         self._preparation_s = 0.0
@@ -300,10 +302,12 @@ class NmpcController:
         the way ahead and the rules of the road, the linearisation and the QP. The next
         `feedback` then embeds its state and solves, if it brings the same segments,
         vessels, waypoints, speed, current, bias and blindness; otherwise it sets the step up
-        itself at its state (using the prepared linearisation where it still holds).
-        `segments`, `vessels`: perception newer than the last step's (a scan that arrived
-        after the command), for the preparation to use instead. Returns its seconds. Does
-        nothing for SQP and IPOPT or before a first plan."""
+        itself at its state (using the prepared linearisation where it still holds). While
+        every step brings other inputs (a new scan each period), the preparation only
+        linearises: a setup would go unused. `segments`, `vessels`: perception newer than
+        the last step's (a scan that arrived after the command), for the preparation to set
+        the step up with. Returns its seconds. Does nothing for SQP and IPOPT or before a
+        first plan."""
         t0 = time.perf_counter()
         self._prepared = None
         if self.method != "rti" or self._plan is None or self._inputs is None:
@@ -318,15 +322,21 @@ class NmpcController:
             inputs = _Inputs.of(
                 check_segments(segments) if segments is not None else inputs.segs,
                 _moving(vessels) if vessels is not None else inputs.vessels, *inputs[2:7])
-        x = guess[self._x0_at]
-        before = self._memory()
-        try:
-            setup = self._setup(x[:6], x[6:NX_BOAT], inputs, elapsed, guess,
-                                self._buffers[1])
-            setup.memory = self._memory()
-        finally:
-            self._restore(before)  # the step's own memory moves on only when it is used
-        if self._qp.prepare(guess, setup.p, self._lbw, self._ubw, setup.w_ref):
+        setup = None
+        if self._steady or segments is not None or vessels is not None:
+            # inputs that repeat (or a scan handed in): set the step up for them
+            x = guess[self._x0_at]
+            before = self._memory()
+            try:
+                setup = self._setup(x[:6], x[6:NX_BOAT], inputs, elapsed, guess,
+                                    self._buffers[1])
+                setup.memory = self._memory()
+            finally:
+                self._restore(before)  # the step's own memory moves on only when it is used
+        # else each step brings other inputs (a new scan every period): a setup made now
+        # would go unused; linearise with the last step's parameters alone
+        p, w_ref = (self._last_p, None) if setup is None else (setup.p, setup.w_ref)
+        if self._qp.prepare(guess, p, self._lbw, self._ubw, w_ref):
             self._prepared = _Prepared(elapsed, guess, inputs, setup)
         self._preparation_s = time.perf_counter() - t0
         return self._preparation_s
@@ -395,7 +405,8 @@ class NmpcController:
         fallback = ""
         fed_back = set_up = False
         from_safe_guess = guess is None  # no plan to start from: a retry would be the same
-        if prepared is not None and prepared.inputs.same(inputs):
+        self._steady = self._inputs is not None and self._inputs.same(inputs)
+        if prepared is not None and prepared.setup is not None and prepared.inputs.same(inputs):
             # the step the preparation set up: only the state is new
             setup, set_up = prepared.setup, True
             self._restore(setup.memory)
@@ -422,6 +433,7 @@ class NmpcController:
                     result = self._solve(start, setup.p, setup.w_ref, setup.lbw, setup.ubw)
         self._inputs = inputs
         p, w_ref, lbw, ubw, reference = setup.p, setup.w_ref, setup.lbw, setup.ubw, setup.reference
+        self._last_p = p
         if not result.ok and not from_safe_guess:
             retry = self._solve(self._safe_guess(x_init, reference, setup.slack_ref), p, w_ref,
                                 lbw, ubw)
