@@ -120,8 +120,8 @@ class _Inputs(NamedTuple):
         return _Inputs(segs, vessels, path, speed, current, bias, blind, key)
 
     def same(self, other: "_Inputs") -> bool:
-        return self.key == other.key and self.path is other.path and all(
-            u is v for u, v in zip(self.vessels, other.vessels))
+        # ids stand for identity here: both inputs hold their path and tracks alive
+        return self.key == other.key
 
 
 @dataclass
@@ -328,8 +328,7 @@ class NmpcController:
             x = guess[self._x0_at]
             before = self._memory()
             try:
-                setup = self._setup(x[:6], x[6:NX_BOAT], inputs, elapsed, guess,
-                                    self._buffers[1])
+                setup = self._setup(x[:6], inputs, elapsed, guess, self._buffers[1])
                 setup.memory = self._memory()
             finally:
                 self._restore(before)  # the step's own memory moves on only when it is used
@@ -418,7 +417,7 @@ class NmpcController:
             result, fed_back = self._feed_back(start, setup.p, None, setup.lbw,
                                                setup.ubw), True
         else:
-            setup = self._setup(x, act, inputs, elapsed, guess, self._buffers[0])
+            setup = self._setup(x, inputs, elapsed, guess, self._buffers[0])
             setup.lbw[self._x0_boat] = setup.ubw[self._x0_boat] = x_init
             if guess is None:
                 guess = self._safe_guess(x_init, setup.reference, setup.slack_ref)
@@ -464,9 +463,9 @@ class NmpcController:
                 prepared is not None)
 
     # -- pieces -----------------------------------------------------------------------------
-    def _setup(self, x: np.ndarray, act: np.ndarray, inputs: "_Inputs", elapsed: float,
+    def _setup(self, x: np.ndarray, inputs: "_Inputs", elapsed: float,
                guess: np.ndarray | None, buffers: "_Buffers") -> "_Setup":
-        """Everything a step sets up before its solve, for a boat at x with actuators act: the
+        """Everything a step sets up before its solve, for a boat at x (the state): the
         way ahead, the rules, the reference, the slots, the parameters, the bounds and the
         slack's reference, written into `buffers`. Moves the step's memory on (progress
         search, way ahead, rules, slots)."""

@@ -104,7 +104,6 @@ class NmpcController:
                    "set_up_in_preparation": st.stats.set_up_in_preparation},
         )
 
-
     def prepare(self) -> None:
         """The NMPC's preparation for the next step (`NmpcController.prepare`): for the loop
         to call once the command has gone out, so that the next step's state-in to
