@@ -40,13 +40,16 @@ that meets a polygon's vertex exactly passes it (the vertical line there is not 
 
 from __future__ import annotations
 
+import ctypes
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
+from pathlib import Path
 
 import numpy as np
 
 from controller.errors import InputError
+from controller.kernels import load_kernel, pointer
 
 from ..world.canal import CanalWorld, Obstacle, obstacle_edges
 
@@ -349,6 +352,17 @@ _FACE_LABEL = np.array([FACE, BACKDROP, OBSTACLE, OBSTACLE, WATER], np.int8)
 _TOP_LABEL = np.array([GROUND, BACKDROP, OBSTACLE, OBSTACLE, WATER], np.int8)
 _NEG_INF_KEY = int(_ordered(np.float32([-np.inf]))[0])
 _SOLID_BITS = 24  # a profile key: float32 height as ordered int << 24 | (solid + 1)
+_PROFILE_C = Path(__file__).with_name("lidar_profile.c")
+
+
+def _profile_kernel():
+    """The compiled profile kernel, its argument types set (None: use the numpy version)."""
+    lib = load_kernel(_PROFILE_C)
+    if lib is not None and lib.lidar_profile.restype is not ctypes.c_int:
+        lib.lidar_profile.restype = ctypes.c_int
+        lib.lidar_profile.argtypes = [ctypes.c_int64] + [ctypes.c_void_p] * 13 + [
+            ctypes.c_int8] + [ctypes.c_void_p] * 2
+    return lib
 
 
 @dataclass(frozen=True, eq=False)
@@ -379,6 +393,14 @@ class _Scene:
                    np.zeros(2 * n))
 
     @cached_property
+    def kind_c(self) -> np.ndarray:
+        return np.ascontiguousarray(self.kind, np.int8)
+
+    @cached_property
+    def top_c(self) -> np.ndarray:
+        return np.ascontiguousarray(self.top, np.float64)
+
+    @cached_property
     def profile_key(self) -> np.ndarray:
         """Per solid: a key that orders by top height, ties by index; its low bits hold
         the solid's index + 1 (0 is the water)."""
@@ -404,8 +426,9 @@ class LidarSimulator:
     """Renders scans of a canal world from a boat pose; one seeded generator for all noise."""
 
     def __init__(self, world: CanalWorld, config: LidarConfig | None = None,
-                 seed: int | np.random.Generator | None = 0) -> None:
+                 seed: int | np.random.Generator | None = 0, compiled: bool = True) -> None:
         self.world = world
+        self.compiled = compiled  # False: the numpy version of every step (the reference)
         self.config = config or LidarConfig()
         self.rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
         self.sensors = [_Sensor(m, self.config.hull) for m in self.config.mounts]
@@ -419,6 +442,7 @@ class LidarSimulator:
         self._keys = (beams.bin.astype(np.int64) << 32) + _ordered(beams.tan_el)
         self._n_bins = n_bins = int(sum(s.bins for s in self.sensors))
         self._bin_first = np.searchsorted(beams.bin, np.arange(n_bins + 1))  # beam range per bin
+        self._bin_first64 = self._bin_first.astype(np.int64)
         self._bin_index = np.arange(n_bins)
         self._bin_key = self._bin_index.astype(np.int64) << 32
         # Each bin's lowest and highest beam key (an empty bin: nothing is inside its range).
@@ -614,6 +638,32 @@ class LidarSimulator:
         return self._profile(scene, gbin, t, owner, enter)
 
     def _profile(self, scene: _Scene, gbin, t, owner, enter):
+        """First hits against the height profile of every column (`_profile_numpy`'s
+        method) by the compiled kernel `lidar_profile.c`, bit for bit the same; the numpy
+        version where no kernel can be built."""
+        lib = _profile_kernel() if self.compiled else None
+        if lib is None:
+            return self._profile_numpy(scene, gbin, t, owner, enter)
+        order = np.argsort(gbin * self._t_scale + t, kind="stable")
+        t = np.ascontiguousarray(t[order], np.float64)
+        owner = np.ascontiguousarray(owner[order], np.int64)
+        enter = np.ascontiguousarray(enter[order], np.uint8)
+        first = np.zeros(self._n_bins + 1, np.int64)
+        np.cumsum(np.bincount(gbin, minlength=self._n_bins), out=first[1:])
+        n = len(self._keys)
+        t_all = np.empty(n, np.float32)
+        label = np.empty(n, np.int8)
+        p = pointer
+        rc = lib.lidar_profile(
+            self._n_bins, p(first), p(t), p(owner), p(enter), p(scene.kind_c), p(scene.top_c),
+            p(scene.profile_key), p(self._bin_height), p(self._bin_first64),
+            p(self._beams.tan_el), p(self._beams.inv_drop), p(_FACE_LABEL), p(_TOP_LABEL),
+            WATER, p(t_all), p(label))
+        if rc != 0:
+            raise MemoryError("lidar: the profile kernel ran out of memory")
+        return t_all, label
+
+    def _profile_numpy(self, scene: _Scene, gbin, t, owner, enter):
         """First hits against the height profile of every column, for all beams at once.
 
         The crossings of a column, sorted by distance, cut it into segments; on each the

@@ -1,0 +1,165 @@
+/* First hits against the height profile of every azimuth column: the compiled twin of
+ * LidarSimulator._profile in lidar.py (whose docstring explains the method). Per column,
+ * the crossings sorted by distance cut the ray into segments; the highest solid present on
+ * each gives the profile; beams, sorted by tan(elevation) within a column, then fall into
+ * runs (face of segment i, top of segment i, ..., sky) by the same float32 thresholds as the
+ * numpy version, so the two agree bit for bit. */
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+
+#define SOLID_BITS 24
+#define LAND 0
+#define BACK 1
+#define STANDING 2
+#define WATER_KIND 4
+
+static void sort_keys(int64_t *k, int64_t n)
+{
+    for (int64_t i = 1; i < n; i++) { /* insertion sort: columns hold few crossings */
+        int64_t v = k[i], j = i - 1;
+        while (j >= 0 && k[j] > v) {
+            k[j + 1] = k[j];
+            j--;
+        }
+        k[j + 1] = v;
+    }
+}
+
+static int cmp_keys(const void *a, const void *b)
+{
+    int64_t x = *(const int64_t *)a, y = *(const int64_t *)b;
+    return (x > y) - (x < y);
+}
+
+/* n_cols columns; column c's crossings are first[c] .. first[c + 1] of t, owner, enter,
+ * sorted by distance (ties as given). Per solid: kind, top height, profile key. Per column:
+ * the sensor's height and its beams bin_first[c] .. bin_first[c + 1] (sorted by tan).
+ * face_label and top_label map a kind (0-4) to a label; water_label is the sky's. Writes
+ * every beam's horizontal distance t_all (inf: sky) and label. Returns 0, or -1 when out of
+ * memory. */
+int lidar_profile(int64_t n_cols, const int64_t *first, const double *t, const int64_t *owner,
+                  const uint8_t *enter, const int8_t *kind, const double *top,
+                  const int64_t *profile_key, const double *bin_height,
+                  const int64_t *bin_first, const float *tan_el, const float *inv_drop,
+                  const int8_t *face_label, const int8_t *top_label, int8_t water_label,
+                  float *t_all, int8_t *label)
+{
+    int64_t most = 0;
+    for (int64_t c = 0; c < n_cols; c++)
+        if (first[c + 1] - first[c] > most)
+            most = first[c + 1] - first[c];
+    int64_t *by_solid = malloc(sizeof(int64_t) * (most + 1));
+    int64_t *seg_key = malloc(sizeof(int64_t) * (most + 1));
+    uint8_t *kept = malloc(most + 1);
+    if (!by_solid || !seg_key || !kept) {
+        free(by_solid);
+        free(seg_key);
+        free(kept);
+        return -1;
+    }
+    const int64_t mask = ((int64_t)1 << SOLID_BITS) - 1;
+    for (int64_t c = 0; c < n_cols; c++) {
+        int64_t e0 = first[c], n = first[c + 1] - e0;
+        const double *tc = t + e0;
+        const int64_t *oc = owner + e0;
+        const uint8_t *ec = enter + e0;
+        /* Which solid is highest on each segment (0: before the first crossing; i: after
+         * crossing i - 1): each solid's crossings in distance order, less the pairs where
+         * a ray only touches it (in and out at one point). */
+        for (int64_t i = 0; i < n; i++)
+            by_solid[i] = (oc[i] << 32) | i;
+        if (n <= 32)
+            sort_keys(by_solid, n);
+        else
+            qsort(by_solid, n, sizeof(int64_t), cmp_keys);
+        for (int64_t i = 0; i <= n; i++)
+            seg_key[i] = 0;
+        for (int64_t i = 0; i < n; i++)
+            kept[i] = 1;
+        for (int64_t i = 0; i + 1 < n; i++) {
+            int64_t p = by_solid[i] & 0xFFFFFFFF, q = by_solid[i + 1] & 0xFFFFFFFF;
+            if (oc[p] == oc[q] && ec[p] != ec[q] && fabs(tc[q] - tc[p]) <= 1e-7)
+                kept[i] = kept[i + 1] = 0;
+        }
+        int64_t prev_owner = -1;
+        for (int64_t i = 0; i < n; i++) {
+            if (!kept[i])
+                continue;
+            int64_t p = by_solid[i] & 0xFFFFFFFF, s = oc[p];
+            int is_new = s != prev_owner;
+            prev_owner = s;
+            int64_t nxt = n; /* the solid's next kept crossing, or the column's end */
+            for (int64_t j = i + 1; j < n; j++) {
+                if (!kept[j])
+                    continue;
+                if (oc[by_solid[j] & 0xFFFFFFFF] == s)
+                    nxt = by_solid[j] & 0xFFFFFFFF;
+                break;
+            }
+            int64_t lo, hi;
+            if (ec[p]) {
+                lo = p + 1;
+                hi = nxt + 1;
+            } else if (is_new && kind[s] == STANDING) {
+                lo = 0; /* the sensor is inside it */
+                hi = p + 1;
+            } else {
+                continue;
+            }
+            for (int64_t k = lo; k < hi; k++)
+                if (profile_key[s] > seg_key[k])
+                    seg_key[k] = profile_key[s];
+        }
+        /* The beams of this column, by tan(elevation), through the pieces in turn. */
+        double h = bin_height[c];
+        int64_t b = bin_first[c], b_end = bin_first[c + 1];
+        float C = -INFINITY;
+        for (int64_t i = 0; i <= n && b < b_end; i++) {
+            int64_t top_of = (seg_key[i] & mask) - 1;
+            double height = top_of >= 0 ? top[top_of] : 0.0;
+            int seg_kind = top_of >= 0 ? kind[top_of] : WATER_KIND;
+            double fin = 0.0;
+            int fin_kind = WATER_KIND;
+            if (i > 0 && kind[oc[i - 1]] <= BACK) { /* faces stand at every crossing */
+                fin = top[oc[i - 1]];
+                fin_kind = kind[oc[i - 1]];
+            }
+            double face_height = height > fin ? height : fin;
+            int face_kind = fin > height ? fin_kind : seg_kind;
+            double start = i > 0 ? tc[i - 1] : 0.0;
+            double end = i < n ? tc[i] : INFINITY;
+            double f = (face_height - h) / start;
+            double clear = height < h ? (height - h) / end : (height - h) / start;
+            if (isnan(f))
+                f = -INFINITY;
+            if (isnan(clear))
+                clear = INFINITY;
+            float F = (float)f, CL = (float)clear;
+            float Fp = C > F ? C : F;
+            float Cn = Fp > CL ? Fp : CL;
+            float a = (float)start;
+            int8_t lf = face_label[face_kind], lt = top_label[seg_kind];
+            while (b < b_end && tan_el[b] <= Fp) {
+                t_all[b] = a;
+                label[b] = lf;
+                b++;
+            }
+            float drop = (float)(h - height);
+            while (b < b_end && tan_el[b] <= Cn) {
+                t_all[b] = 0.0f + drop * inv_drop[b];
+                label[b] = lt;
+                b++;
+            }
+            C = Cn;
+        }
+        for (; b < b_end; b++) {
+            t_all[b] = INFINITY;
+            label[b] = water_label;
+        }
+    }
+    free(by_solid);
+    free(seg_key);
+    free(kept);
+    return 0;
+}
