@@ -43,6 +43,7 @@ def load_kernel(source: Path) -> ctypes.CDLL | None:
     return lib
 
 
-def pointer(array) -> ctypes.c_void_p:
-    """The address of a C-contiguous numpy array's data, for a kernel's argument."""
-    return ctypes.c_void_p(array.ctypes.data)
+def pointer(array) -> int:
+    """The address of a C-contiguous numpy array's data, for a kernel's argument (declared
+    c_void_p). The caller keeps the array alive for the call."""
+    return array.__array_interface__["data"][0]

@@ -355,13 +355,30 @@ _SOLID_BITS = 24  # a profile key: float32 height as ordered int << 24 | (solid 
 _PROFILE_C = Path(__file__).with_name("lidar_profile.c")
 
 
+_KERNEL: list = []  # the loaded kernel (or None), once per process
+
+
 def _profile_kernel():
-    """The compiled profile kernel, its argument types set (None: use the numpy version)."""
+    """The compiled kernels of this renderer, argument types set (None: use numpy)."""
+    if _KERNEL:
+        return _KERNEL[0]
     lib = load_kernel(_PROFILE_C)
-    if lib is not None and lib.lidar_profile.restype is not ctypes.c_int:
+    _KERNEL.append(lib)
+    if lib is not None and not getattr(lib, "typed", False):
+        i64, ptr, f64 = ctypes.c_int64, ctypes.c_void_p, ctypes.c_double
+        lib.lidar_profile.argtypes = [i64] + [ptr] * 13 + [ctypes.c_int8] + [ptr] * 2
+        lib.lidar_cast.restype = i64
+        lib.lidar_cast.argtypes = [i64] + [ptr] * 13 + [f64] * 3 + [ptr] * 4
+        lib.lidar_in_range.restype = i64
+        lib.lidar_in_range.argtypes = [i64] + [ptr] * 4
+        lib.lidar_keep.restype = i64
+        lib.lidar_keep.argtypes = [i64, ptr, ptr, ptr, ctypes.c_int, ctypes.c_int,
+                                   ctypes.c_int8, ptr, ptr]
+        lib.lidar_points.restype = None
+        lib.lidar_points.argtypes = [i64, ptr, ptr, ptr, ptr, ctypes.c_float, ptr, ptr, i64,
+                                     i64, ptr, ptr, ptr, ctypes.c_int8, ptr, i64]
         lib.lidar_profile.restype = ctypes.c_int
-        lib.lidar_profile.argtypes = [ctypes.c_int64] + [ctypes.c_void_p] * 13 + [
-            ctypes.c_int8] + [ctypes.c_void_p] * 2
+        lib.typed = True
     return lib
 
 
@@ -391,6 +408,22 @@ class _Scene:
                    np.array([w.height_m for w in world.walls]
                             + [w.backdrop_height_m for w in world.walls], float),
                    np.zeros(2 * n))
+
+    @cached_property
+    def a_c(self) -> np.ndarray:  # (the kernels' views: contiguous, of their C types)
+        return np.ascontiguousarray(self.a, np.float64)
+
+    @cached_property
+    def b_c(self) -> np.ndarray:
+        return np.ascontiguousarray(self.b, np.float64)
+
+    @cached_property
+    def owner_c(self) -> np.ndarray:
+        return np.ascontiguousarray(self.owner, np.int64)
+
+    @cached_property
+    def side_c(self) -> np.ndarray:
+        return np.ascontiguousarray(self.side, np.float64)
 
     @cached_property
     def kind_c(self) -> np.ndarray:
@@ -462,9 +495,22 @@ class LidarSimulator:
         self._bin_count = counts
         self._bin_offset = np.concatenate([[0], np.cumsum(counts)[:-1]])
         self._bin_step = 2.0 * np.pi / counts
+        self._bin_offset64 = self._bin_offset.astype(np.int64)
+        self._bin_count64 = counts.astype(np.int64)
+        self._beam_start64 = self._beam_start.astype(np.int64)
+        self._origins32 = np.ascontiguousarray([s.origin_body for s in self.sensors], np.float32)
         local = np.arange(counts.sum()) - np.repeat(self._bin_offset, counts)
         self._bin_cos = np.cos(local * np.repeat(self._bin_step, counts))
         self._bin_sin = np.sin(local * np.repeat(self._bin_step, counts))
+        b = self._beams  # addresses of the fixed tables the kernels read (they live as long)
+        self._at = {name: arr.ctypes.data for name, arr in (
+            ("bin_offset", self._bin_offset64), ("bin_count", self._bin_count64),
+            ("bin_cos", self._bin_cos), ("bin_sin", self._bin_sin),
+            ("bin_height", self._bin_height), ("bin_first", self._bin_first64),
+            ("tan_el", b.tan_el), ("inv_drop", b.inv_drop), ("min_h", b.min_h),
+            ("max_h", b.max_h), ("cos_el", b.cos_el), ("vec", b.vec),
+            ("beam_start", self._beam_start64), ("origins", self._origins32),
+            ("face_label", _FACE_LABEL), ("top_label", _TOP_LABEL))}
 
     @property
     def mount_positions_body(self) -> np.ndarray:
@@ -585,7 +631,7 @@ class LidarSimulator:
             return np.zeros(0, np.intp), np.zeros(0), np.zeros(0, np.intp), np.zeros(0, bool)
         # One row per (sensor, edge).
         n_s, n_e = len(origins), len(keep)
-        edge = np.tile(keep, n_s)
+        edge = np.tile(keep.astype(np.int64), n_s)
         sensor = np.repeat(np.arange(n_s), n_e)
         o = origins[sensor]
         step = self._bin_step[sensor]
@@ -600,6 +646,21 @@ class LidarSimulator:
         k0 = np.ceil(lo / step).astype(np.int64)
         turns = np.rint((lo + np.abs(span) - hi) / (2 * np.pi)).astype(np.int64)
         k1 = np.floor(hi / step).astype(np.int64) + turns * self._bin_count[sensor]
+        count = np.maximum(k1 - k0 + 1, 0)
+        lib = _profile_kernel() if self.compiled else None
+        if lib is not None:  # the crossings bin by bin, compiled (the same arithmetic)
+            total = int(count.sum())
+            gbin, t = np.empty(total, np.int64), np.empty(total)
+            owner, enter = np.empty(total, np.int64), np.empty(total, np.uint8)
+            p, at = pointer, self._at
+            sensor = np.ascontiguousarray(sensor, np.int64)
+            n = lib.lidar_cast(len(edge), p(k0), p(count), p(edge), p(sensor), p(scene.a_c),
+                               p(scene.b_c), p(scene.owner_c), p(scene.side_c),
+                               p(np.ascontiguousarray(origins, float)), at["bin_offset"],
+                               at["bin_count"], at["bin_cos"], at["bin_sin"],
+                               math.cos(psi), math.sin(psi), float(reach), p(gbin), p(t),
+                               p(owner), p(enter))
+            return gbin[:n], t[:n], owner[:n], enter[:n].view(bool)
         count = np.maximum(k1 - k0 + 1, 0)
         row = np.repeat(np.arange(len(edge)), count)
         k = np.repeat(k0 - (np.cumsum(count) - count), count) + np.arange(int(count.sum()))
@@ -653,12 +714,11 @@ class LidarSimulator:
         n = len(self._keys)
         t_all = np.empty(n, np.float32)
         label = np.empty(n, np.int8)
-        p = pointer
+        p, at = pointer, self._at
         rc = lib.lidar_profile(
             self._n_bins, p(first), p(t), p(owner), p(enter), p(scene.kind_c), p(scene.top_c),
-            p(scene.profile_key), p(self._bin_height), p(self._bin_first64),
-            p(self._beams.tan_el), p(self._beams.inv_drop), p(_FACE_LABEL), p(_TOP_LABEL),
-            WATER, p(t_all), p(label))
+            p(scene.profile_key), at["bin_height"], at["bin_first"], at["tan_el"],
+            at["inv_drop"], at["face_label"], at["top_label"], WATER, p(t_all), p(label))
         if rc != 0:
             raise MemoryError("lidar: the profile kernel ran out of memory")
         return t_all, label
@@ -836,6 +896,9 @@ class LidarSimulator:
         """The scan from every beam's first-hit distance and label: beams within range,
         dropouts and speckle off the water, range noise, the points, the own hull's returns
         (with room for the spray after them); their labels and sensors if `labelled`."""
+        lib = _profile_kernel() if self.compiled else None
+        if lib is not None:
+            return self._render_compiled(lib, t_all, label, n_spray, labelled)
         beams = self._beams
         noise = self.config.noise
         rng = self.rng
@@ -872,6 +935,45 @@ class LidarSimulator:
                 noise.water_ripple_m)
 
         # Own hull: fixed returns, with dropouts and range noise.
+        hull = out[:, n:n + m]
+        beams.hull_points.take(hull_keep, axis=1, out=hull)
+        hull += beams.hull_unit.take(hull_keep, axis=1) * (
+            self._normal(m) * f32(noise.range_sigma_m))
+        if not labelled:
+            return out, None, None
+        return (out,
+                np.concatenate([lab, np.full(m, HULL, np.int8)]),
+                np.concatenate([beams.sensor[idx], beams.hull_sensor[hull_keep]]))
+
+    def _render_compiled(self, lib, t_all, label, n_spray, labelled):
+        """`_render` with its per-beam passes compiled: the same draws of the generator in
+        the same order, the same float32 arithmetic, the same scan bit for bit."""
+        beams = self._beams
+        noise = self.config.noise
+        f32 = np.float32
+        p = pointer
+        t_all = np.ascontiguousarray(t_all, f32)
+        label = np.ascontiguousarray(label, np.int8)
+        idx = np.empty(len(t_all), np.int64)
+        at = self._at
+        n_ret = lib.lidar_in_range(len(t_all), p(t_all), at["min_h"], at["max_h"], p(idx))
+        u = np.ascontiguousarray(self._uniform16(n_ret))
+        drop, speckle = _level16(noise.dropout), _level16(noise.dropout + noise.water_speckle)
+        lab = np.empty(n_ret, np.int8)
+        n_water = ctypes.c_int64(0)
+        n = lib.lidar_keep(n_ret, p(idx), p(label), p(u), drop, speckle, WATER, p(lab),
+                           ctypes.byref(n_water))
+        idx, lab = idx[:n], lab[:n]
+        normal = np.ascontiguousarray(self._normal(n), f32)
+        hull_keep = np.flatnonzero(self._uniform16(beams.hull_points.shape[1]) >= drop)
+        m = len(hull_keep)
+        out = np.empty((3, n + m + n_spray), f32)
+        ripple = (self.rng.uniform(-1.0, 1.0, n_water.value).astype(f32) * f32(
+            noise.water_ripple_m)) if n_water.value else np.zeros(1, f32)
+        lib.lidar_points(n, p(idx), p(lab), p(t_all), p(normal), f32(noise.range_sigma_m),
+                         at["cos_el"], at["vec"], len(t_all), len(self.sensors),
+                         at["beam_start"], at["origins"], p(ripple), WATER, p(out),
+                         out.shape[1])
         hull = out[:, n:n + m]
         beams.hull_points.take(hull_keep, axis=1, out=hull)
         hull += beams.hull_unit.take(hull_keep, axis=1) * (

@@ -163,3 +163,104 @@ int lidar_profile(int64_t n_cols, const int64_t *first, const double *t, const i
     free(kept);
     return 0;
 }
+
+/* The 2-D cast's crossings (LidarSimulator._cast): row r pairs edge row_edge[r] with the
+ * bins k0[r] .. k0[r] + count[r] - 1 of sensor row_sensor[r] (bins wrap modulo the sensor's
+ * count). For each, the crossing of the bin's ray from the sensor's origin (heading: cos
+ * cp, sin sp) with the edge a -> b, kept when 1e-6 < t <= reach; written in row and bin
+ * order: the bin (numbered across sensors), distance, solid, and whether the ray enters
+ * it. Returns how many were written. */
+int64_t lidar_cast(int64_t n_rows, const int64_t *k0, const int64_t *count,
+                   const int64_t *row_edge, const int64_t *row_sensor, const double *a,
+                   const double *b, const int64_t *edge_owner, const double *edge_side,
+                   const double *origins, const int64_t *bin_offset, const int64_t *bin_count,
+                   const double *bin_cos, const double *bin_sin, double cp, double sp,
+                   double reach, int64_t *gbin, double *t, int64_t *owner, uint8_t *enter)
+{
+    int64_t n = 0;
+    for (int64_t r = 0; r < n_rows; r++) {
+        int64_t e = row_edge[r], s = row_sensor[r], nb = bin_count[s];
+        double ax = a[2 * e], ay = a[2 * e + 1];
+        double ex = b[2 * e] - ax, ey = b[2 * e + 1] - ay;
+        double rx = ax - origins[2 * s], ry = ay - origins[2 * s + 1];
+        double num = rx * ey - ry * ex;
+        for (int64_t j = 0; j < count[r]; j++) {
+            int64_t k = k0[r] + j, m = k % nb;
+            if (m < 0)
+                m += nb;
+            int64_t g = bin_offset[s] + m;
+            double cb = bin_cos[g], sb = bin_sin[g];
+            double dx = cp * cb - sp * sb, dy = sp * cb + cp * sb;
+            double den = dx * ey - dy * ex;
+            double tt = num / den;
+            if (tt > 1e-6 && tt <= reach) {
+                gbin[n] = g;
+                t[n] = tt;
+                owner[n] = edge_owner[e];
+                enter[n] = edge_side[e] * den < 0.0;
+                n++;
+            }
+        }
+    }
+    return n;
+}
+
+/* The scan's returns, first part: the beams within range (min_h <= t <= max_h), as
+ * indices. Returns how many. */
+int64_t lidar_in_range(int64_t n, const float *t_all, const float *min_h, const float *max_h,
+                       int64_t *idx)
+{
+    int64_t m = 0;
+    for (int64_t i = 0; i < n; i++)
+        if (t_all[i] >= min_h[i] && t_all[i] <= max_h[i])
+            idx[m++] = i;
+    return m;
+}
+
+/* Second part: of those, the ones a 16-bit draw u keeps (u >= drop; a water return only if
+ * u < speckle), compacted in place with their labels. Returns how many; *n_water: how many
+ * of them are water. */
+int64_t lidar_keep(int64_t n, int64_t *idx, const int8_t *label, const uint16_t *u,
+                   int drop, int speckle, int8_t water, int8_t *lab, int64_t *n_water)
+{
+    int64_t m = 0, w = 0;
+    for (int64_t i = 0; i < n; i++) {
+        int8_t l = label[idx[i]];
+        if (u[i] >= drop && (l != water || u[i] < speckle)) {
+            idx[m] = idx[i];
+            lab[m] = l;
+            w += l == water;
+            m++;
+        }
+    }
+    *n_water = w;
+    return m;
+}
+
+/* Third part: the points (3 rows of stride `stride` in out) of the kept beams: range noise
+ * (normal * sigma * cos_el), along the beam's body-frame vector per horizontal metre, from
+ * its sensor's origin (sensor k's beams start at beam_start[k]); water points moved up by
+ * ripple[j] (j-th water point). */
+void lidar_points(int64_t n, const int64_t *idx, const int8_t *lab, const float *t_all,
+                  const float *normal, float sigma, const float *cos_el, const float *vec,
+                  int64_t n_beams, int64_t n_sensors, const int64_t *beam_start,
+                  const float *origin, const float *ripple, int8_t water, float *out,
+                  int64_t stride)
+{
+    int64_t k = 0, w = 0;
+    for (int64_t j = 0; j < n; j++) {
+        int64_t i = idx[j];
+        while (k + 1 < n_sensors && i >= beam_start[k + 1])
+            k++;
+        float t = t_all[i] + normal[j] * (sigma * cos_el[i]);
+        float x = vec[i] * t, y = vec[n_beams + i] * t, z = vec[2 * n_beams + i] * t;
+        x += origin[3 * k];
+        y += origin[3 * k + 1];
+        z += origin[3 * k + 2];
+        if (lab[j] == water)
+            z -= ripple[w++];
+        out[j] = x;
+        out[stride + j] = y;
+        out[2 * stride + j] = z;
+    }
+}
