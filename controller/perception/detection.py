@@ -21,6 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..kernels import pointer
+from .cloud_crop import crop_kernel
 from ..geometry import point_segment_distance
 
 
@@ -124,9 +126,49 @@ def crop_xy(points, config: DetectionConfig = DEFAULT):
 
 
 def _crop(p: np.ndarray, config: DetectionConfig):
-    """Indices of the points `crop_mask` keeps, and their x and y. The height band (a few
-    percent of a scan: the wall faces) is tested first on the whole cloud, the rest on what
-    it keeps; columns are gathered one by one (fast for C- and Fortran-ordered clouds)."""
+    """Indices of the points `crop_mask` keeps, and their x and y: by the compiled kernel
+    `cloud_crop.c` (one pass over the cloud, through its strides), or `_crop_numpy`."""
+    lib = crop_kernel()
+    if lib is None or p.dtype not in (np.float32, np.float64) or p.ndim != 2 \
+            or p.shape[1] != 3 or not len(p):
+        return _crop_numpy(p, config)
+    n = len(p)
+    size = p.itemsize
+    idx = np.empty(n, np.int64)
+    x, y = np.empty(n, p.dtype), np.empty(n, p.dtype)
+    x0, x1 = config.hull_x_m
+    crop = lib.crop_f32 if p.dtype == np.float32 else lib.crop_f64
+    m = crop(n, p.__array_interface__["data"][0], p.strides[0] // size, p.strides[1] // size,
+             config.min_height_m, config.max_height_m, config.range_m, x0, x1,
+             config.hull_half_width_m, x0 - config.wake_length_m, config.wake_half_width_m,
+             pointer(idx), pointer(x), pointer(y))
+    return idx[:m], x[:m], y[:m]
+
+
+def crop_rows(points, config: DetectionConfig = DEFAULT) -> np.ndarray:
+    """The points of a clean (N, 3) cloud that `crop_mask` keeps, as an (M, 3) array of
+    the cloud's dtype in the cloud's order (`points[crop_xy(points)[0]]`, gathered in one
+    compiled pass)."""
+    p = np.asarray(points)
+    lib = crop_kernel()
+    if lib is None or p.dtype not in (np.float32, np.float64) or p.ndim != 2 \
+            or p.shape[1] != 3 or not len(p):
+        return p[_crop_numpy(p, config)[0]]
+    out = np.empty((len(p), 3), p.dtype)
+    x0, x1 = config.hull_x_m
+    crop = lib.crop_rows_f32 if p.dtype == np.float32 else lib.crop_rows_f64
+    size = p.itemsize
+    m = crop(len(p), p.__array_interface__["data"][0], p.strides[0] // size,
+             p.strides[1] // size, config.min_height_m, config.max_height_m, config.range_m,
+             x0, x1, config.hull_half_width_m, x0 - config.wake_length_m,
+             config.wake_half_width_m, pointer(out))
+    return out[:m]
+
+
+def _crop_numpy(p: np.ndarray, config: DetectionConfig):
+    """`_crop`'s numpy twin. The height band (a few percent of a scan: the wall faces) is
+    tested first on the whole cloud, the rest on what it keeps; columns are gathered one by
+    one (fast for C- and Fortran-ordered clouds)."""
     z = p[:, 2]
     idx = np.flatnonzero((z <= -config.min_height_m) & (z >= -config.max_height_m))  # z down
     x, y = p[:, 0].take(idx), p[:, 1].take(idx)

@@ -42,7 +42,9 @@ import numpy as np
 from ..errors import InputError
 from ..geometry import wrap_angle
 from .clusters import Clusters, find_clusters, free_space, remember_walls
-from .detection import DEFAULT, DetectionConfig, crop_xy
+from ..kernels import pointer
+from .cloud_crop import crop_kernel
+from .detection import DEFAULT, DetectionConfig, crop_rows
 
 
 @dataclass(frozen=True)
@@ -403,22 +405,9 @@ class VesselTracker:
         # detection band of it is what the clusters are made of. (Columns one by one:
         # fast for the column-major clouds LiDAR drivers and the simulator deliver.) A
         # cropped cloud is that crop already (cropping it again keeps every point).
-        if cropped:
-            x, y, z = cloud[:, 0], cloud[:, 1], cloud[:, 2]
-        else:
-            idx, x, y = crop_xy(cloud, self._occluder_crop)
-            z = cloud[:, 2].take(idx)
-        occluders = np.empty((len(x), 2), cloud.dtype)
-        occluders[:, 0] = x
-        occluders[:, 1] = y
-        band = (z <= -cfg.detection.min_height_m) & (z >= -cfg.detection.max_height_m)
-        hull = None
-        if cfg.viewpoints:  # the own hull's returns cut sight lines, but are no cluster
-            inside = _in_hull_box(x, y, cfg.detection)
-            if inside.any():
-                hull = np.column_stack([x[inside], y[inside], -z[inside]]).astype(float)
-                occluders, band = occluders[~inside], band[~inside]
-        xy = occluders[band].astype(float)
+        if not cropped:
+            cloud = crop_rows(cloud, self._occluder_crop)
+        occluders, xy, hull = split_crop(cloud, cfg)
         found = find_clusters(xy, p, segs, cfg, self._walls, occluders, hull)
         self._walls = remember_walls(self._walls, segs[segs[:, 3] > cfg.max_vessel_length_m],
                                      t, cfg)
@@ -521,8 +510,45 @@ def crop_for_tracker(points, config: TrackerConfig) -> np.ndarray:
     taller height band: all of it can hide things), in the cloud's order: what a process
     that scans and detects sends to the one that tracks (`update(..., cropped=True)`)
     instead of the whole cloud. Cropping twice gives the same points."""
-    p = np.asarray(points)
-    return p[crop_xy(p, _tracker_crop(config))[0]]
+    return crop_rows(points, _tracker_crop(config))
+
+
+def split_crop(cloud: np.ndarray, cfg: TrackerConfig):
+    """The tracker's crop of a scan, (N, 3), split: (occluders (x, y, the cloud's dtype:
+    all of it can hide things), the detection band's points (x, y, float64: what clusters
+    are made of), the own hull's returns (x, y, height up, float64; None: none, or the
+    LiDARs not placed)). The compiled pass of `cloud_crop.c`, or `split_crop_numpy`."""
+    lib = crop_kernel()
+    if lib is None or cloud.dtype not in (np.float32, np.float64):
+        return split_crop_numpy(cloud, cfg)
+    n, det = len(cloud), cfg.detection
+    occluders = np.empty((n, 2), cloud.dtype)
+    xy, hull = np.empty((n, 2)), np.empty((n, 3))
+    counts = np.zeros(3, np.int64)
+    size = cloud.itemsize
+    split = lib.split_f32 if cloud.dtype == np.float32 else lib.split_f64
+    split(n, cloud.__array_interface__["data"][0] if n else 0, cloud.strides[0] // size,
+          cloud.strides[1] // size, det.min_height_m, det.max_height_m, bool(cfg.viewpoints),
+          *det.hull_x_m, det.hull_half_width_m, pointer(occluders), pointer(xy), pointer(hull),
+          pointer(counts))
+    n_occ, n_band, n_hull = counts.tolist()
+    return occluders[:n_occ], xy[:n_band], (hull[:n_hull] if n_hull else None)
+
+
+def split_crop_numpy(cloud: np.ndarray, cfg: TrackerConfig):
+    """`split_crop`'s numpy twin."""
+    x, y, z = cloud[:, 0], cloud[:, 1], cloud[:, 2]
+    occluders = np.empty((len(x), 2), cloud.dtype)
+    occluders[:, 0] = x
+    occluders[:, 1] = y
+    band = (z <= -cfg.detection.min_height_m) & (z >= -cfg.detection.max_height_m)
+    hull = None
+    if cfg.viewpoints:  # the own hull's returns cut sight lines, but are no cluster
+        inside = _in_hull_box(x, y, cfg.detection)
+        if inside.any():
+            hull = np.column_stack([x[inside], y[inside], -z[inside]]).astype(float)
+            occluders, band = occluders[~inside], band[~inside]
+    return occluders, occluders[band].astype(float), hull
 
 
 @lru_cache(maxsize=8)

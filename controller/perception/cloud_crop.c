@@ -1,0 +1,112 @@
+/* The detector's crop of a body-frame cloud (detection._crop), in one pass: the points in
+ * the height band (z down: -max_h <= z <= -min_h), within `range` of the boat in x and y,
+ * outside the own hull's box and the wake's box behind it. The cloud is read through its
+ * strides (in elements), so row- and column-major clouds need no copy; the thresholds are
+ * compared in the cloud's own precision, as numpy compares them. Writes the kept points'
+ * indices (ascending) and their x and y; returns how many. */
+#include <stdint.h>
+
+#define CROP(NAME, T)                                                                       \
+    int64_t NAME(int64_t n, const T *p, int64_t row, int64_t col, double min_h_d,          \
+                 double max_h_d, double range_d, double x0_d, double x1_d, double hull_w_d, \
+                 double wake_x0_d, double wake_w_d, int64_t *idx, T *xo, T *yo)            \
+    {                                                                                       \
+        T lo = (T)(-max_h_d), hi = (T)(-min_h_d), r = (T)range_d, nr = (T)(-range_d);       \
+        T x0 = (T)x0_d, x1 = (T)x1_d, hw = (T)hull_w_d, wx0 = (T)wake_x0_d;                 \
+        T ww = (T)wake_w_d;                                                                 \
+        int64_t m = 0;                                                                      \
+        for (int64_t i = 0; i < n; i++) {                                                   \
+            T z = p[i * row + 2 * col];                                                     \
+            if (!(z <= hi && z >= lo))                                                      \
+                continue;                                                                   \
+            T x = p[i * row], y = p[i * row + col];                                         \
+            T ay = y < 0 ? -y : y;                                                          \
+            if (!(x >= nr && x <= r && ay <= r))                                            \
+                continue;                                                                   \
+            if (x >= x0 && x <= x1 && ay <= hw)                                             \
+                continue;                                                                   \
+            if (x >= wx0 && x < x0 && ay <= ww)                                             \
+                continue;                                                                   \
+            idx[m] = i;                                                                     \
+            xo[m] = x;                                                                      \
+            yo[m] = y;                                                                      \
+            m++;                                                                            \
+        }                                                                                   \
+        return m;                                                                           \
+    }
+
+CROP(crop_f32, float)
+CROP(crop_f64, double)
+
+/* The same crop, the kept points written as rows x, y, z of `out` (m x 3): what
+ * `cloud[idx]` gives, without the gather through a column-major view. */
+#define CROP_ROWS(NAME, T)                                                                  \
+    int64_t NAME(int64_t n, const T *p, int64_t row, int64_t col, double min_h_d,          \
+                 double max_h_d, double range_d, double x0_d, double x1_d, double hull_w_d, \
+                 double wake_x0_d, double wake_w_d, T *out)                                 \
+    {                                                                                       \
+        T lo = (T)(-max_h_d), hi = (T)(-min_h_d), r = (T)range_d, nr = (T)(-range_d);       \
+        T x0 = (T)x0_d, x1 = (T)x1_d, hw = (T)hull_w_d, wx0 = (T)wake_x0_d;                 \
+        T ww = (T)wake_w_d;                                                                 \
+        int64_t m = 0;                                                                      \
+        for (int64_t i = 0; i < n; i++) {                                                   \
+            T z = p[i * row + 2 * col];                                                     \
+            if (!(z <= hi && z >= lo))                                                      \
+                continue;                                                                   \
+            T x = p[i * row], y = p[i * row + col];                                         \
+            T ay = y < 0 ? -y : y;                                                          \
+            if (!(x >= nr && x <= r && ay <= r))                                            \
+                continue;                                                                   \
+            if (x >= x0 && x <= x1 && ay <= hw)                                             \
+                continue;                                                                   \
+            if (x >= wx0 && x < x0 && ay <= ww)                                             \
+                continue;                                                                   \
+            out[3 * m] = x;                                                                 \
+            out[3 * m + 1] = y;                                                             \
+            out[3 * m + 2] = z;                                                             \
+            m++;                                                                            \
+        }                                                                                   \
+        return m;                                                                           \
+    }
+
+CROP_ROWS(crop_rows_f32, float)
+CROP_ROWS(crop_rows_f64, double)
+
+/* The tracker's split of its crop (n points x, y, z, strides in elements): the occluders
+ * (x, y of every point not in the own hull's box when `hull_box`, in the cloud's precision),
+ * which of them lie in the detection band (band_xy, float64), and the hull's own returns
+ * (hull: x, y, height up, float64). counts: occluders, band points, hull points. */
+#define SPLIT(NAME, T)                                                                      \
+    void NAME(int64_t n, const T *p, int64_t row, int64_t col, double min_h_d,             \
+              double max_h_d, int hull_box, double x0_d, double x1_d, double hull_w_d,      \
+              T *occluders, double *band_xy, double *hull, int64_t *counts)                \
+    {                                                                                       \
+        T lo = (T)(-max_h_d), hi = (T)(-min_h_d);                                           \
+        T x0 = (T)x0_d, x1 = (T)x1_d, hw = (T)hull_w_d;                                     \
+        int64_t n_occ = 0, n_band = 0, n_hull = 0;                                          \
+        for (int64_t i = 0; i < n; i++) {                                                   \
+            T x = p[i * row], y = p[i * row + col], z = p[i * row + 2 * col];               \
+            T ay = y < 0 ? -y : y;                                                          \
+            if (hull_box && x >= x0 && x <= x1 && ay <= hw) {                               \
+                hull[3 * n_hull] = x;                                                       \
+                hull[3 * n_hull + 1] = y;                                                   \
+                hull[3 * n_hull + 2] = -z;                                                  \
+                n_hull++;                                                                   \
+                continue;                                                                   \
+            }                                                                               \
+            occluders[2 * n_occ] = x;                                                       \
+            occluders[2 * n_occ + 1] = y;                                                   \
+            n_occ++;                                                                        \
+            if (z <= hi && z >= lo) {                                                       \
+                band_xy[2 * n_band] = x;                                                    \
+                band_xy[2 * n_band + 1] = y;                                                \
+                n_band++;                                                                   \
+            }                                                                               \
+        }                                                                                   \
+        counts[0] = n_occ;                                                                  \
+        counts[1] = n_band;                                                                 \
+        counts[2] = n_hull;                                                                 \
+    }
+
+SPLIT(split_f32, float)
+SPLIT(split_f64, double)
