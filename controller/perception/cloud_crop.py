@@ -1,6 +1,6 @@
 """The compiled crops of a LiDAR cloud (`cloud_crop.c`): detection's crop (indices, x and
 y; or the rows) and the tracker's split of its crop into occluders, band points and the own
-hull's returns. Loaded once per process; None where nothing can be compiled, and the
+hull's returns; and detection's occupancy grid (`occupancy.c`). Loaded once per process; None where nothing can be compiled, and the
 callers (`detection._crop`, `tracking.split_crop`) then use their numpy twins."""
 
 from __future__ import annotations
@@ -34,3 +34,19 @@ def crop_kernel():
     return _KERNEL[0]
 
 
+
+
+_OCCUPANCY: list = []
+
+
+def occupancy_kernel():
+    """The compiled occupancy grid (None: the numpy version), loaded once per process."""
+    if not _OCCUPANCY:
+        lib = load_kernel(Path(__file__).with_name("occupancy.c"))
+        if lib is not None:
+            lib.occupancy.restype = ctypes.c_int64
+            lib.occupancy.argtypes = [ctypes.c_int64, ctypes.c_void_p, ctypes.c_void_p,
+                                      ctypes.c_int64, ctypes.c_double, ctypes.c_double,
+                                      *[ctypes.c_void_p] * 6]
+        _OCCUPANCY.append(lib)
+    return _OCCUPANCY[0]

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..kernels import pointer
-from .cloud_crop import crop_kernel
+from .cloud_crop import crop_kernel, occupancy_kernel
 from ..geometry import point_segment_distance
 
 
@@ -382,7 +382,38 @@ _ONES = np.ones(4096)
 def _occupancy(xy: np.ndarray, cfg: DetectionConfig):
     """The occupancy grid (rows along x, columns along y, 255 = occupied) and the centroid of
     the points in each occupied cell: the grid is what Hough sees, the centroids what the
-    lines are fitted to (as exact as the points, a fraction of their number)."""
+    lines are fitted to (as exact as the points, a fraction of their number). By the
+    compiled kernel `occupancy.c` (the same sums in the same order), or `_occupancy_numpy`."""
+    lib = occupancy_kernel()
+    if lib is None:
+        return _occupancy_numpy(xy, cfg)
+    n = int(math.ceil(2 * cfg.range_m / cfg.cell_m))
+    x, y = np.ascontiguousarray(xy[:, 0], float), np.ascontiguousarray(xy[:, 1], float)
+    m = len(x)
+    grid = np.empty((n, n), np.uint8)
+    flat = np.empty(m, np.int64)
+    scratch = _scratch(n * n)
+    sums = np.empty((3, m))
+    k = lib.occupancy(m, pointer(x), pointer(y), n, float(cfg.range_m), 1.0 / cfg.cell_m,
+                      pointer(grid), pointer(flat), pointer(scratch), pointer(sums[0]),
+                      pointer(sums[1]), pointer(sums[2]))
+    centroids = np.empty((k, 2))
+    centroids[:, 0], centroids[:, 1] = sums[0, :k], sums[1, :k]
+    return grid, centroids
+
+
+_SCRATCH: list = []
+
+
+def _scratch(size: int) -> np.ndarray:
+    """A reused int64 buffer of at least `size` (the kernel's cell lookup; not zeroed)."""
+    if not _SCRATCH or len(_SCRATCH[0]) < size:
+        _SCRATCH[:] = [np.empty(size, np.int64)]
+    return _SCRATCH[0]
+
+
+def _occupancy_numpy(xy: np.ndarray, cfg: DetectionConfig):
+    """`_occupancy`'s numpy twin."""
     n = int(math.ceil(2 * cfg.range_m / cfg.cell_m))
     # (Column by column: reductions along the short axis of an (N, 2) array are slow.)
     x, y = xy[:, 0], xy[:, 1]

@@ -17,6 +17,7 @@ and whether the summaries agree.
 from __future__ import annotations
 
 import json
+import math
 import statistics
 import tempfile
 from dataclasses import replace
@@ -117,10 +118,19 @@ def _describe(timings: list, steps: int) -> dict:
            "cpu_real_time_factor": round(0.1 * steps / statistics.median(
                t["cpu_s"] for t in timings), 2),
            "loop_ms_per_step": {p: per_step_ms([t["where_the_time_goes_s"][p] for t in timings])
-                                for p in parts}}
+                                for p in parts},
+           # the loop's own thread's CPU per part (the perception worker's is beside)
+           "loop_cpu_ms_per_step": {
+               p: per_step_ms([t["where_the_cpu_goes_s"][p] for t in timings])
+               for p in timings[0].get("where_the_cpu_goes_s", {})},
+           "cpu_ms_per_step": round(1e3 * statistics.median(t["cpu_s"] for t in timings)
+                                    / steps, 3)}
     if "perception" in timings[0]:
         out["lidar_ms_per_step"] = {
             p: per_step_ms([t["perception"][f"{p}_s"] for t in timings])
+            for p in ("lidar_scan", "detection", "tracking")}
+        out["lidar_cpu_ms_per_step"] = {
+            p: per_step_ms([t["perception"].get(f"{p}_cpu_s", math.nan) for t in timings])
             for p in ("lidar_scan", "detection", "tracking")}
     out["solve_ms"] = timings[-1]["solve_ms"]
     return out

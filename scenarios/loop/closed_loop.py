@@ -103,13 +103,17 @@ class RunResult:
 
 
 class _Timer:
-    """Accumulates wall time per component, for 'where the time goes'."""
+    """Accumulates wall time and this thread's CPU time per component, for 'where the time
+    goes' (the CPU time means something on a loaded machine too)."""
 
     def __init__(self):
         self.total: dict[str, float] = {}
+        self.cpu: dict[str, float] = {}
 
-    def add(self, name: str, seconds: float) -> None:
+    def add(self, name: str, seconds: float, cpu_s: float | None = None) -> None:
         self.total[name] = self.total.get(name, 0.0) + seconds
+        if cpu_s is not None:
+            self.cpu[name] = self.cpu.get(name, 0.0) + cpu_s
 
 
 def run_closed_loop(plant: Plant, controller: Controller, perception: Perception,
@@ -167,22 +171,22 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
             t = k * cfg.control_period_s
             est = nav.state if own_estimate else np.asarray(out.estimate, float)
             outlines, contact, canal_width, clearance = world.at(t)
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.thread_time()
             found = perceive(t, out.state, est)
             if any(a <= t < b for a, b in cfg.lidar_outages_s):
                 found = None  # the scan is lost (a configured outage)
             view = feed.update(t, found, est[:2])
             segs = view.segments
-            t1 = time.perf_counter()
+            t1, c1 = time.perf_counter(), time.thread_time()
             extra = {}  # what the controller takes: a controller of the older interface knows
             if takes_blind:  # neither blindness nor other vessels
                 extra["blind"] = view.blind
             if takes_vessels:
                 extra["vessels"] = view.tracks
             decision = controller.step(t, est, out.actuators.copy(), segs, **extra)
-            t2 = time.perf_counter()
-            timer.add("perception", t1 - t0)
-            timer.add("controller", t2 - t1)
+            t2, c2 = time.perf_counter(), time.thread_time()
+            timer.add("perception", t1 - t0, c1 - c0)
+            timer.add("controller", t2 - t1, c2 - c1)
             estimator_s = decision.stats.get("estimator_s")
             if estimator_s is not None:
                 timer.add("water_estimator", estimator_s)  # (part of the controller's time)
@@ -199,9 +203,9 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
             else:
                 command = np.clip(np.asarray(decision.command, float).reshape(2), -100, 100)
             if prepare is not None:  # the command is out: the controller's next step
-                tp = time.perf_counter()  # is prepared off the state-to-command path
-                prepare()
-                timer.add("controller", time.perf_counter() - tp)
+                tp, cp = time.perf_counter(), time.thread_time()  # is prepared off the
+                prepare()  # state-to-command path
+                timer.add("controller", time.perf_counter() - tp, time.thread_time() - cp)
             prev = rows_cmd[-1] if rows_cmd else np.zeros(2)
             rate = (command - prev) / cfg.control_period_s
             clear = clearance.of(out.state)
@@ -223,12 +227,12 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
                 (t2 - t1) * 1e3, decision, segs, width, view, true_current,
             )
             if viz is not None:
-                tv = time.perf_counter()
+                tv, cv = time.perf_counter(), time.thread_time()
                 viz.step(t, out.state, est, outlines, segs, decision, view, command, rate,
                          out.actuators, clear, xt, (t2 - t1) * 1e3,
                          cloud=getattr(perception, "last_cloud", None),
                          vessels=[(v.name, v.outline_at(t)) for v in cfg.vessels])
-                timer.add("viz", time.perf_counter() - tv)
+                timer.add("viz", time.perf_counter() - tv, time.thread_time() - cv)
             water = decision.stats.get("water")
             if water is not None:
                 rows_water.append((t, *true_current, *water.current_ne, out.state[3]))
@@ -260,10 +264,10 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
                 plant.set_current(true_current)
             try:
                 for i in range(n_imu):
-                    ta = time.perf_counter()
+                    ta, ca = time.perf_counter(), time.thread_time()
                     out = plant.step(command, cfg.imu_period_s)
-                    tb = time.perf_counter()
-                    timer.add("plant", tb - ta)
+                    tb, cb = time.perf_counter(), time.thread_time()
+                    timer.add("plant", tb - ta, cb - ca)
                     if not own_estimate:
                         continue
                     sample = ahrs.measure(out.state, out.state_dot)
@@ -275,7 +279,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
                         nav.update_gps(fix.position_ne, fix.velocity_ne)
                         if viz is not None:
                             viz.gps_fix(t + (i + 1) * cfg.imu_period_s, fix.position_ne)
-                    timer.add("navigation", time.perf_counter() - tb)
+                    timer.add("navigation", time.perf_counter() - tb, time.thread_time() - cb)
             except PlantFailure as exc:  # e.g. a lost MAVLink link: what was logged stays
                 status = f"plant failed: {exc}"
                 break
@@ -339,6 +343,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
         "wall_time_s": wall,
         "real_time_factor": duration / wall if wall > 0 else None,
         "where_the_time_goes_s": {k: round(v, 4) for k, v in sorted(timer.total.items())},
+        "where_the_cpu_goes_s": {k: round(v, 4) for k, v in sorted(timer.cpu.items())},
     }
     if phases:
         for i, key in enumerate(("feedback_latency_ms", "preparation_ms", "nmpc_step_ms")):

@@ -45,7 +45,8 @@ class DelayedLidarPerception:
                  parallel: bool | None = None, tracking=None, cloud_points: int = 0):
         self.parallel = (os.cpu_count() or 1) > 1 if parallel is None else bool(parallel)
         self.points_per_scan: list[int] = []
-        self.time_s = {"lidar_scan": 0.0, "detection": 0.0, "tracking": 0.0}
+        self.time_s = {"lidar_scan": 0.0, "detection": 0.0, "tracking": 0.0,
+                       "lidar_scan_cpu": 0.0, "detection_cpu": 0.0, "tracking_cpu": 0.0}
         self._ready = None  # serial: (result, points, timing) of the last request
         self._requested = None  # the method asked for last ("segments" or "perceive")
         self.last_cloud = None
@@ -92,6 +93,7 @@ class DelayedLidarPerception:
                 return None if segs is None else Percept(segs)
             found = self._tracking.track(*scanned, cropped, segs)
             self.time_s["tracking"] = self._tracking.time_s
+            self.time_s["tracking_cpu"] = self._tracking.cpu_s
         return found
 
     def close(self) -> None:

@@ -75,3 +75,19 @@ def test_split_of_the_trackers_crop_matches_its_numpy_twin(dtype, viewpoints):
         else:
             assert a.dtype == b.dtype and np.array_equal(a, b)
     assert (want[2] is not None) == bool(viewpoints)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_compiled_occupancy_matches_its_numpy_twin(seed):
+    """Points on cell borders, outside the grid and many per cell: the same grid and the
+    same centroids bit for bit."""
+    from controller.perception.detection import _occupancy, _occupancy_numpy
+
+    rng = np.random.default_rng(seed)
+    r, cell = DEFAULT.range_m, DEFAULT.cell_m
+    xy = rng.uniform(-r - 5, r + 5, (20_000, 2))
+    xy[:5000] = np.round(xy[:5000] / cell) * cell  # on the borders
+    xy[5000:9000] = xy[5000:5001] + rng.normal(0, 0.01, (4000, 2))  # crowded cells
+    (g1, c1), (g2, c2) = _occupancy(xy, DEFAULT), _occupancy_numpy(xy, DEFAULT)
+    assert g1.dtype == g2.dtype and np.array_equal(g1, g2)
+    assert np.array_equal(c1, c2) and len(c1) > 1000
