@@ -61,6 +61,8 @@ class SolverStats:
     fed_back: bool = False  # the feedback used the prepared QP (False: linearised anew)
     set_up_in_preparation: bool = False  # the reference, slots and gradient were the
     # preparation's, made at the predicted state: the feedback only embedded the state
+    elastic_segments: float = 0.0  # the last QP's largest violation of a segment row (h)
+    elastic_vessels: float = 0.0  # ... and of a vessel row (exact-penalty rows; 0: none)
 
     @property
     def time_glue_s(self) -> float:
@@ -758,6 +760,8 @@ class NmpcController:
         preparation's seconds (the one before this feedback, or with `split` the one after)
         count in the step's total."""
         command, rates, clipped = command
+        qp = getattr(self, "_qp", None)  # (IPOPT has none)
+        elastic = qp.elastic() if qp is not None else (0.0, 0.0)
         stats = SolverStats(
             method=self.method, ok=result.ok, converged=result.converged, status=result.status,
             fallback=fallback, sqp_iterations=result.sqp_iterations,
@@ -771,6 +775,7 @@ class NmpcController:
             vessels=vessel_sel.ids, vessels_dropped=vessel_sel.dropped,
             rules=rules.reason, fed_back=fed_back, set_up_in_preparation=set_up,
             time_feedback_s=times[0],
-            time_preparation_s=preparation_s)
+            time_preparation_s=preparation_s, elastic_segments=elastic[0],
+            elastic_vessels=elastic[1])
         return NmpcStep(command, rates, plan[self._states_boat_at], plan[self._inputs_rates_at],
                         plan[self._slack_ref_at], reference, stats)

@@ -161,7 +161,10 @@ def _load_library(build: HpipmBuild, directory: Path) -> tuple[ctypes.CDLL, bool
     lib.nmpc_qp_create.argtypes = [ctypes.c_int] * 5 + [_c_int_p, ctypes.c_int, _c_int_p,
                                                          _c_double_p, _c_double_p, ctypes.c_int,
                                                          ctypes.c_int, ctypes.c_double,
-                                                         ctypes.c_double, ctypes.c_int]
+                                                         ctypes.c_double, ctypes.c_int,
+                                                         ctypes.c_double, ctypes.c_double]
+    lib.nmpc_qp_slack.restype = ctypes.c_void_p
+    lib.nmpc_qp_slack.argtypes = [ctypes.c_void_p]
     lib.nmpc_qp_bind.restype = None
     lib.nmpc_qp_bind.argtypes = [ctypes.c_void_p] + [_c_double_p] * 14 + [_c_int_p, _c_double_p]
     lib.nmpc_qp_set.restype = None
@@ -186,7 +189,8 @@ class HpipmOcpQp:
 
     def __init__(self, N: int, nx: int, nu: int, ng: int, idxbx, idxbu, Q, R,
                  mode: str = "speed_abs", iter_max: int = 50, tol: float = 1e-6,
-                 mu0: float = 0.0, warm_start: int = 0, build: HpipmBuild | None = None):
+                 mu0: float = 0.0, warm_start: int = 0, build: HpipmBuild | None = None,
+                 soft_l1: float = 0.0, soft_l2: float = 0.0):
         self.build = build or casadi_build()
         self.lib, self.cache_hit, self.compile_s = load_library(self.build)
         self.N, self.nx, self.nu, self.ng = N, nx, nu, ng
@@ -197,7 +201,7 @@ class HpipmOcpQp:
         self._handle = self.lib.nmpc_qp_create(
             N, nx, nu, ng, len(idxbx), idxbx.ctypes.data_as(_c_int_p), len(idxbu),
             idxbu.ctypes.data_as(_c_int_p), _ptr(Q), _ptr(R), MODES[mode], iter_max, tol, mu0,
-            int(warm_start))
+            int(warm_start), float(soft_l1), float(soft_l2))
         if not self._handle:
             raise MemoryError("HPIPM: could not allocate the QP")
         z = np.zeros
@@ -214,6 +218,11 @@ class HpipmOcpQp:
         self.lib.nmpc_qp_bind(self._handle, *map(_ptr, arrays),
                               self.info.ctypes.data_as(_c_int_p), _ptr(self.res))
         self._set, self._solve = self.lib.nmpc_qp_set, self.lib.nmpc_qp_solve
+        self.soft = soft_l1 > 0
+        # the soft rows' slacks of the last solve, (N+1) x ng (stage 0: 0), read in place
+        address = self.lib.nmpc_qp_slack(self._handle)
+        self.slack = (np.ctypeslib.as_array((ctypes.c_double * ((N + 1) * ng)).from_address(
+            address)).reshape(N + 1, ng) if address else None)
 
     def set(self, what: int, first: int = 0, stop: int | None = None) -> None:
         """Copy the groups `what` (SET_ flags, summed) of stages first..stop-1 into the QP."""

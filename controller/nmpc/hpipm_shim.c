@@ -8,7 +8,10 @@
  *   stages k = 1..N-1: x_{k+1} = A_k x_k + B_k u_k + b_k;
  *   cost 1/2 x'diag(Q_k)x + q_k'x + 1/2 u'diag(R_k)u + r_k'u;
  *   box bounds on nbx state and nbu input components (fixed indices),
- *   lg_k <= C_k x_k <= ug_k on stages 1..N (no input terms).
+ *   lg_k <= C_k x_k <= ug_k on stages 1..N (no input terms), hard, or soft with an exact
+ *   penalty: lg_k - sl_k <= C_k x_k, sl_k >= 0, costing soft_l1 * sl + soft_l2 / 2 * sl^2,
+ *   so the QP is feasible whatever the rows ask, and its answer is the hard QP's whenever
+ *   that one is feasible and soft_l1 exceeds its largest multiplier.
  *
  * The blocks are bound once (`nmpc_qp_bind`, numpy arrays that live as long as the QP);
  * `nmpc_qp_set` copies a group of them for a range of stages into HPIPM's QP, so that the
@@ -47,11 +50,15 @@
     X(d_ocp_qp_ipm_ws_create) X(d_ocp_qp_ipm_solve) X(d_ocp_qp_ipm_get_status)               \
     X(d_ocp_qp_ipm_get_iter) X(d_ocp_qp_ipm_get_max_res_stat)                                \
     X(d_ocp_qp_ipm_get_max_res_eq) X(d_ocp_qp_ipm_get_max_res_ineq)                          \
-    X(d_ocp_qp_ipm_get_max_res_comp)
+    X(d_ocp_qp_ipm_get_max_res_comp) X(d_ocp_qp_dim_set_ns) X(d_ocp_qp_set_idxs)               \
+    X(d_ocp_qp_set_Zl) X(d_ocp_qp_set_Zu) X(d_ocp_qp_set_zl) X(d_ocp_qp_set_zu)               \
+    X(d_ocp_qp_set_lls) X(d_ocp_qp_set_lus) X(d_ocp_qp_sol_get_sl)
 
 #define DECLARE(name) __typeof__(&name) name;
 static struct { HPIPM_FUNCTIONS(DECLARE) } F;
 static void *blasfeo_handle, *hpipm_handle;
+/* newer HPIPM counts soft general rows apart (nsg); older ones know only ns */
+static void (*set_nsg)(int stage, int value, struct d_ocp_qp_dim *dim);
 
 /* Open BLASFEO then HPIPM by path and look the functions up: 0 on success, else the number
  * of the failing step (1, 2: a library; 3: a missing function). */
@@ -65,6 +72,7 @@ int nmpc_qp_load(const char *blasfeo_path, const char *hpipm_path)
     if (!h) return 2;
 #define LOOKUP(name) if (!(*(void **)&F.name = dlsym(h, #name))) return 3;
     HPIPM_FUNCTIONS(LOOKUP)
+    *(void **)&set_nsg = dlsym(h, "d_ocp_qp_dim_set_nsg");
     hpipm_handle = h;
     return 0;
 }
@@ -72,8 +80,9 @@ int nmpc_qp_load(const char *blasfeo_path, const char *hpipm_path)
 const char *nmpc_qp_load_error(void) { return dlerror(); }
 
 typedef struct {
-    int N, nx, nu, ng, nbx, nbu;
-    int *idxbx, *idxbu;
+    int N, nx, nu, ng, nbx, nbu, ns;
+    int *idxbx, *idxbu, *idxs;
+    double *Zsoft, *zsoft, *zero, *sl;
     double *Qdense, *Rdense, *Sdense, *Ddense; /* per stage, built once */
     double *A, *B, *b, *q, *r, *lbx, *ubx, *lbu, *ubu, *C, *lg, *ug, *x, *u, *res;
     int *info;
@@ -90,15 +99,22 @@ typedef struct {
 void nmpc_qp_free(nmpc_qp *h);
 
 /* Q: (N+1) x nx diagonals (stage 0 ignored); R: N x nu diagonals. warm_start: HPIPM's (0
- * none, 1 primal, 2 primal and dual from the previous solution). Needs `nmpc_qp_load`. */
+ * none, 1 primal, 2 primal and dual from the previous solution). soft_l1 > 0: the general
+ * rows are soft (exact penalty soft_l1 per unit, plus soft_l2 / 2 per unit squared); 0: hard.
+ * Needs `nmpc_qp_load`. */
 nmpc_qp *nmpc_qp_create(int N, int nx, int nu, int ng, int nbx, const int *idxbx, int nbu,
                         const int *idxbu, const double *Q, const double *R, int mode,
-                        int iter_max, double tol, double mu0, int warm_start)
+                        int iter_max, double tol, double mu0, int warm_start, double soft_l1,
+                        double soft_l2)
 {
     if (!hpipm_handle) return NULL;
     nmpc_qp *h = calloc(1, sizeof(nmpc_qp));
     if (!h) return NULL;
     h->N = N; h->nx = nx; h->nu = nu; h->ng = ng; h->nbx = nbx; h->nbu = nbu;
+    h->ns = soft_l1 > 0 ? ng : 0;
+    ALLOC(h->idxs, 2 * ng); ALLOC(h->Zsoft, ng); ALLOC(h->zsoft, ng); ALLOC(h->zero, ng);
+    ALLOC(h->sl, (N + 1) * ng);
+    for (int j = 0; j < ng; j++) { h->Zsoft[j] = soft_l2; h->zsoft[j] = soft_l1; }
     ALLOC(h->idxbx, nbx); memcpy(h->idxbx, idxbx, sizeof(int) * nbx);
     ALLOC(h->idxbu, nbu); memcpy(h->idxbu, idxbu, sizeof(int) * nbu);
     ALLOC(h->Qdense, (N + 1) * nx * nx); ALLOC(h->Rdense, N * nu * nu);
@@ -116,6 +132,8 @@ nmpc_qp *nmpc_qp_create(int N, int nx, int nu, int ng, int nbx, const int *idxbx
         F.d_ocp_qp_dim_set_nbx(k, k == 0 ? 0 : nbx, &h->dim);
         F.d_ocp_qp_dim_set_nbu(k, k == N ? 0 : nbu, &h->dim);
         F.d_ocp_qp_dim_set_ng(k, k == 0 ? 0 : ng, &h->dim);
+        if (set_nsg) set_nsg(k, k == 0 ? 0 : h->ns, &h->dim);
+        else F.d_ocp_qp_dim_set_ns(k, k == 0 ? 0 : h->ns, &h->dim);
     }
     h->qp_mem = malloc(F.d_ocp_qp_memsize(&h->dim));
     F.d_ocp_qp_create(&h->dim, &h->qp, h->qp_mem);
@@ -130,6 +148,17 @@ nmpc_qp *nmpc_qp_create(int N, int nx, int nu, int ng, int nbx, const int *idxbx
         if (k > 0) {
             F.d_ocp_qp_set_idxbx(k, h->idxbx, &h->qp);
             F.d_ocp_qp_set_D(k, h->Ddense, &h->qp);
+        }
+        if (k > 0 && h->ns) { /* soft rows: the general ones, after the bounds */
+            int first = (k < N ? nbu : 0) + nbx;
+            for (int j = 0; j < ng; j++) h->idxs[j] = first + j;
+            F.d_ocp_qp_set_idxs(k, h->idxs, &h->qp);
+            F.d_ocp_qp_set_Zl(k, h->Zsoft, &h->qp);
+            F.d_ocp_qp_set_Zu(k, h->Zsoft, &h->qp);
+            F.d_ocp_qp_set_zl(k, h->zsoft, &h->qp);
+            F.d_ocp_qp_set_zu(k, h->zsoft, &h->qp);
+            F.d_ocp_qp_set_lls(k, h->zero, &h->qp);
+            F.d_ocp_qp_set_lus(k, h->zero, &h->qp);
         }
     }
     h->sol_mem = malloc(F.d_ocp_qp_sol_memsize(&h->dim));
@@ -214,13 +243,22 @@ int nmpc_qp_solve(nmpc_qp *h)
     memset(h->x, 0, sizeof(double) * nx);
     for (int k = 1; k <= N; k++) F.d_ocp_qp_sol_get_x(k, &h->sol, h->x + k * nx);
     for (int k = 0; k < N; k++) F.d_ocp_qp_sol_get_u(k, &h->sol, h->u + k * nu);
+    if (h->ns)
+        for (int k = 1; k <= N; k++) F.d_ocp_qp_sol_get_sl(k, &h->sol, h->sl + k * h->ng);
     return h->info[0];
+}
+
+/* The lower slacks of the soft rows of the last solve: (N+1) x ng (stage 0 zeros), or
+ * NULL when the rows are hard. */
+const double *nmpc_qp_slack(const nmpc_qp *h)
+{
+    return h->ns ? h->sl : NULL;
 }
 
 void nmpc_qp_free(nmpc_qp *h)
 {
     if (!h) return;
-    void *blocks[] = {h->idxbx, h->idxbu, h->Qdense, h->Rdense, h->Sdense, h->Ddense,
+    void *blocks[] = {h->idxs, h->Zsoft, h->zsoft, h->zero, h->sl, h->idxbx, h->idxbu, h->Qdense, h->Rdense, h->Sdense, h->Ddense,
                       h->dim_mem, h->qp_mem, h->sol_mem, h->arg_mem, h->ws_mem};
     for (size_t i = 0; i < sizeof(blocks) / sizeof(blocks[0]); i++) free(blocks[i]);
     free(h);

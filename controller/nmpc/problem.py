@@ -59,6 +59,7 @@ NU = 3  # [dnT, dnS, sigma]: sigma is the next stage's slack
 STATE_NAMES = ("x", "y", "psi", "u", "v", "r", "nT", "nS", "slack")
 INPUT_NAMES = ("dnT", "dnS", "next_slack")
 _NP = len(PARAM_NAMES)  # boat parameters
+OBSTACLE_ROWS = ("exact-penalty", "hard")
 
 
 @dataclass(frozen=True)
@@ -81,6 +82,14 @@ class NmpcConfig:
     hull_offsets_m: tuple[float, float] = (2.0, -2.0)  # circle centres along body x (l_b, -l_s)
     separation_m: float = 2.0  # d_p: 2 m in simulation, 4 m in the field
     min_half_axis_m: float = 0.1  # the slack may shrink R_b + d_p down to this
+    # How the QP treats the obstacle rows: "exact-penalty" (each row may be violated at a
+    # cost of obstacle_l1 per unit of h, plus obstacle_l2 / 2 per unit squared: the QP is
+    # feasible whatever a crowded canal or a mistaken track asks, and equals the hard one
+    # whenever that is feasible, as obstacle_l1 is above its multipliers) or "hard" (the
+    # paper's: a QP with no feasible point fails). Input bounds and rate limits stay hard.
+    obstacle_rows: str = "exact-penalty"
+    obstacle_l1: float = 1e5  # per unit of h: the SQP merit's weight, above the multipliers
+    obstacle_l2: float = 1e2  # per unit of h squared: keeps the elastic QP well conditioned
     segment_slots: int = 16
     segment_range_m: float = 50.0  # segments farther than this are left out
     vessel_slots: int = 4  # other vessels avoided over the horizon (`vessel_slots`)
@@ -109,7 +118,7 @@ class NmpcConfig:
                 value = tuple(np.asarray(value).reshape(-1).tolist())  # weights as a list
                 object.__setattr__(self, f.name, value)
             values = value if isinstance(value, tuple) else (value,)
-            if f.name in ("boat", "terminal_factor", "colreg") or value is None:
+            if f.name in ("boat", "terminal_factor", "colreg", "obstacle_rows") or value is None:
                 continue
             if any(not isinstance(v, numbers.Real) or isinstance(v, (bool, np.bool_))
                    for v in values):
@@ -150,6 +159,13 @@ class NmpcConfig:
             bad("min_half_axis_m", "must be below R_b + d_p")
         if len(self.hull_offsets_m) != 2:
             bad("hull_offsets_m", "needs the two circle centres")
+        if self.obstacle_rows not in OBSTACLE_ROWS:
+            bad("obstacle_rows", f"choose one of {', '.join(OBSTACLE_ROWS)}")
+        for name in ("obstacle_l1", "obstacle_l2"):
+            if getattr(self, name) < 0:
+                bad(name, "must not be negative")
+        if self.obstacle_rows == "exact-penalty" and not self.obstacle_l1 > 0:
+            bad("obstacle_l1", "must be positive for exact-penalty obstacle rows")
         if not isinstance(self.boat, BoatParams):
             bad("boat", "expected a BoatParams")
 

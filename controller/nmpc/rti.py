@@ -128,10 +128,14 @@ class QpStep:
         ocp, o = self.ocp, self.options
         N, nx, nu, nh = ocp.N, NX, NU, ocp.n_h
         self.bounded_states = np.array([6, 7, 8])  # nT, nS, slack
+        c = ocp.config
+        soft = c.obstacle_rows == "exact-penalty"
         self.qp = HpipmOcpQp(N, nx, nu, nh, self.bounded_states, np.arange(nu),
                              self.hessian[self.states_at], self.hessian[self.inputs_at],
                              o.hpipm_mode, o.iter_max, o.tol, o.mu0, o.warm_start,
-                             choose_build(o.hpipm_build))
+                             choose_build(o.hpipm_build),
+                             soft_l1=c.obstacle_l1 if soft else 0.0,
+                             soft_l2=c.obstacle_l2 if soft else 0.0)
         self.qp.ug[:] = o.inf
         self._bind_hpipm()
         self._solve = self._solve_hpipm
@@ -267,6 +271,17 @@ class QpStep:
         t2 = time.perf_counter()
         ok = ok and bool(np.isfinite(dw).all())
         return QpStepResult(dw, ok, status, iterations, t1 - t0, t2 - t1)
+
+    def elastic(self) -> tuple[float, float]:
+        """How far the last QP's soft obstacle rows were violated, in units of h: the largest
+        slack over the horizon of the segment rows and of the vessel rows ((0, 0) when the
+        rows are hard: another QP solver, or `obstacle_rows = "hard"`)."""
+        qp = getattr(self, "qp", None)
+        if qp is None or qp.slack is None or self._solve != self._solve_hpipm:
+            return 0.0, 0.0
+        n_seg = 2 * self.ocp.config.segment_slots  # rows: both circles' segments, then vessels
+        sl = qp.slack
+        return float(sl[:, :n_seg].max(initial=0.0)), float(sl[:, n_seg:].max(initial=0.0))
 
     # -- any QP solver through CasADi's conic interface ---------------------------------------
     def _init_conic(self) -> None:

@@ -157,6 +157,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
     rows_width: list[tuple[float, float, float]] = []
     collided = False
     fallback_steps = 0
+    elastic_max, elastic_steps = [0.0, 0.0], 0  # the NMPC's soft obstacle rows (h units)
     waiting_before = ""
     takes = inspect.signature(controller.step).parameters
     takes_blind, takes_vessels = "blind" in takes, "vessels" in takes
@@ -222,6 +223,10 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
             watch.update(t, out.state, segs)
             waiting = str(decision.stats.get("waiting", ""))
             fallback_steps += bool(decision.stats.get("fallback", ""))
+            elastic = decision.stats.get("elastic")
+            if elastic is not None:
+                elastic_max = [max(a, b) for a, b in zip(elastic_max, elastic)]
+                elastic_steps += max(elastic) > 1e-3
             log.write_step(
                 t, out.state, est, command, rate, out.actuators, clear, xt,
                 (t2 - t1) * 1e3, decision, segs, width, view, true_current,
@@ -314,6 +319,10 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
         "final_distance_to_goal_m": _round(float(np.hypot(*(out.state[:2] - goal)))),
         "steps": len(rows_t),
         "fallback_steps": fallback_steps,
+        # how far the NMPC's QPs had to violate their linearised obstacle rows (units of h,
+        # about metres per metre of margin; exact-penalty rows only) and on how many steps
+        "elastic": {"max_segment_rows": _round(elastic_max[0]),
+                    "max_vessel_rows": _round(elastic_max[1]), "steps": elastic_steps},
     }
     episodes = metrics.waiting_episodes(rows_waiting, rows_speed, cfg.control_period_s)
     summary.update({k: _round(v) for k, v in episodes.items()})

@@ -101,7 +101,8 @@ class NmpcController:
                    "feedback_s": st.stats.time_feedback_s,
                    "preparation_s": st.stats.time_preparation_s,
                    "nmpc_step_s": st.stats.time_total_s, "fed_back": st.stats.fed_back,
-                   "set_up_in_preparation": st.stats.set_up_in_preparation},
+                   "set_up_in_preparation": st.stats.set_up_in_preparation,
+                   "elastic": (st.stats.elastic_segments, st.stats.elastic_vessels)},
         )
 
     def prepare(self) -> None:

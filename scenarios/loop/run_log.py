@@ -22,7 +22,7 @@ LOG_COLUMNS = (
        "segments_cleaned", "perception_age_s", "blind", "slack_m", "status",
        "current_true_n_mps", "current_true_e_mps", "current_est_n_mps", "current_est_e_mps",
        "current_sigma_n_mps", "current_sigma_e_mps", "bias_u_mps2", "bias_v_mps2",
-       "bias_r_radps2", "tracks", "rules")
+       "bias_r_radps2", "tracks", "rules", "elastic_segments", "elastic_vessels")
 )
 SEGMENT_COLUMNS = ("time_s", "x_c_m", "y_c_m", "theta_rad", "length_m")
 TRACK_COLUMNS = ("time_s", "id", "x_m", "y_m", "v_north_mps", "v_east_mps", "heading_rad",
@@ -79,6 +79,8 @@ class RunLog:
         else:
             row += [repr(float(v)) for v in (*water.current_ne, *water.current_sigma, *water.bias)]
         row += [len(view.tracks) if view is not None else 0, decision.stats.get("rules", "")]
+        elastic = decision.stats.get("elastic")  # the NMPC's soft obstacle rows (h units)
+        row += ["", ""] if elastic is None else [repr(float(v)) for v in elastic]
         self._w.writerow(row)
         for s in np.asarray(segments, float).reshape(-1, 4):
             self._sw.writerow([f"{t:.3f}", *(repr(float(v)) for v in s)])
