@@ -262,20 +262,29 @@ class ObstacleWatch:
                 for k, o in enumerate(self.obstacles)]
 
 
-def waiting_episodes(waiting, speed_mps, dt: float, at_rest_mps: float = 0.05) -> dict:
+def waiting_episodes(waiting, speed_mps, dt: float, at_rest_mps: float = 0.05,
+                     approach_mps: float = 0.3) -> dict:
     """How long the controller waited (a stop made for a blocked way or blindness), how long
-    of that the boat was held at rest (from the first step below `at_rest_mps` in each
-    episode to its end), and the highest speed while held."""
+    of that the boat was held at rest, and the highest speed while held.
+
+    Held: from the step the boat comes to rest (below `at_rest_mps`) at its stop point to the
+    episode's end. An episode that starts at rest (the obstruction in view at the start) has
+    the boat first approach its stop point: once it has made way (above `approach_mps`), it
+    is held from when it comes to rest again; one that never makes way (a crawl) is held from
+    the start, so its creeping counts."""
     waiting = np.asarray(waiting, bool)
     speed = np.asarray(speed_mps, float)
     held = np.zeros(len(waiting), bool)
-    resting = False
-    for k in range(len(waiting)):
-        if not waiting[k]:
-            resting = False
-            continue
-        resting = resting or speed[k] < at_rest_mps
-        held[k] = resting
+    edges = np.flatnonzero(np.diff(np.r_[0, waiting.astype(np.int8), 0]))
+    for start, end in zip(edges[::2], edges[1::2]):  # each episode: steps start..end-1
+        v = speed[start:end]
+        from_k = 0
+        made_way = np.flatnonzero(v > approach_mps)
+        if v[0] < at_rest_mps and len(made_way):  # at rest at first: the approach is not held
+            from_k = made_way[0]
+        rest = np.flatnonzero(v[from_k:] < at_rest_mps)
+        if len(rest):
+            held[start + from_k + rest[0]:end] = True
     return {
         "time_waiting_s": float(np.count_nonzero(waiting) * dt),
         "time_held_s": float(np.count_nonzero(held) * dt),

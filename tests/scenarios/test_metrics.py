@@ -112,3 +112,30 @@ def test_clearance_of_one_pose_is_clearance_bit_for_bit():
     for pose in poses:
         assert c.of(pose).tobytes() == clearance(pose[None], outlines)[0].tobytes()
     assert np.all(Clearance(()).of(poses[0]) == np.inf)
+
+
+def test_an_approach_from_rest_to_the_stop_point_is_not_held():
+    """Issue 34 (4): the obstruction in view at the start, the boat at rest: it first makes
+    way to its stop point, and the hold counts from when it comes to rest there."""
+    from scenarios.results.metrics import waiting_episodes
+
+    speed = [0.0] * 3 + [0.5, 1.0, 1.0, 0.5, 0.2] + [0.01] * 10
+    out = waiting_episodes([True] * len(speed), speed, 0.1)
+    assert out["time_held_s"] == pytest.approx(1.0) and out["max_speed_while_held_mps"] == 0.01
+
+
+def test_a_crawl_from_rest_is_held_and_its_creeping_counts():
+    from scenarios.results.metrics import waiting_episodes
+
+    speed = [0.0] * 3 + [0.1, 0.2, 0.15] * 5
+    out = waiting_episodes([True] * len(speed), speed, 0.1)
+    assert out["time_held_s"] == pytest.approx(1.8) and out["max_speed_while_held_mps"] == 0.2
+
+
+def test_an_episode_under_way_is_held_from_its_first_step_at_rest():
+    from scenarios.results.metrics import waiting_episodes
+
+    speed = [2.0, 1.0, 0.5, 0.04, 0.06, 0.0] + [2.0] * 3
+    out = waiting_episodes([True] * 6 + [False] * 3, speed, 0.1)
+    assert out["time_waiting_s"] == pytest.approx(0.6)
+    assert out["time_held_s"] == pytest.approx(0.3) and out["max_speed_while_held_mps"] == 0.06
