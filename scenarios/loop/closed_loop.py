@@ -82,6 +82,7 @@ class LoopConfig:
     feed: FeedConfig = FeedConfig()  # how long the last segments bridge missing scans
     current_field: object = None  # scenarios.world.current.CurrentField; None: current_ne
     vessels: tuple = ()  # scenarios.world.vessels.Vessel: other boats, for the metrics
+    walls: tuple = ()  # the true walls alone (polylines): tracks on them are no boats
     target_speed_mps: float = 2.0  # "steady running" for the water metrics: near this speed
 
 
@@ -162,7 +163,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
     takes = inspect.signature(controller.step).parameters
     takes_blind, takes_vessels = "blind" in takes, "vessels" in takes
     encounters = EncounterWatch(cfg.vessels)
-    tracking = TrackingWatch(cfg.vessels)
+    tracking = TrackingWatch(cfg.vessels, walls=cfg.walls)
     perceive = getattr(perception, "perceive", None) or perception.segments
     prepare = getattr(controller, "prepare", None)  # an NMPC's preparation phase
     wall0 = time.perf_counter()
@@ -339,6 +340,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
         summary["obstacles"] = watch.summary()
     if cfg.vessels:
         summary["vessels"] = encounters.summary(cfg.control_period_s)
+    if cfg.vessels or tracking.saw_tracks:
         summary["tracking"] = tracking.summary()
     if rows_water:
         summary["water"] = {"mode": getattr(controller, "water", None),

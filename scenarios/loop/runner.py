@@ -96,6 +96,7 @@ def loop_config(scenario: Scenario, seed: int) -> LoopConfig:
     return LoopConfig(
         duration_s=scenario.duration_s, waypoints=scenario.waypoints,
         outlines=tuple(world.wall_polylines()) + tuple(o.closed for o in hit),
+        walls=tuple(world.wall_polylines()),
         outline_removed_at_s=(None,) * len(world.walls) + tuple(o.remove_at_s for o in hit),
         obstacles=tuple(WatchedObstacle(o.name, o.kind, o.closed, o.remove_at_s) for o in hit),
         desired_separation_m=R_B_M + scenario.d_p_m, goal_radius_m=scenario.goal_radius_m,

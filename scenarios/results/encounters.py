@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from controller.geometry import point_segment_distance, segments_cross
+from controller.geometry import distance_to_polylines, point_segment_distance, segments_cross
 
 from .metrics import HULL_BREADTH_M, HULL_LENGTH_M
 
@@ -103,17 +103,29 @@ class TrackingWatch:
     errors are pooled; a moving track that matches none is a false vessel. A vessel is in view
     from when a corner of its hull enters the detector's crop (|x|, |y| <= `visible_m` in the
     boat's frame; what lies in between is not checked, so round a bend the delay counts
-    from before the first line of sight)."""
+    from before the first line of sight).
 
-    def __init__(self, vessels, match_m: float = 6.0, visible_m: float = 60.0):
+    Tracks that mean no boat: a confirmed track matching no vessel whose centre lies within
+    `wall_m` of a true wall (`walls`, polylines) is a wall taken for a boat, moving or not;
+    their number, the longest and their total time are counted. Track continuity: each
+    vessel's matched track ids in time; a change of id is a switch."""
+
+    def __init__(self, vessels, match_m: float = 6.0, visible_m: float = 60.0, walls=(),
+                 wall_m: float = 1.0):
         self.vessels = tuple(vessels)
         self.match_m, self.visible_m = match_m, visible_m
         self._pos_err, self._vel_err = [], []
         self.first_visible = [None] * len(self.vessels)
         self.first_confirmed = [None] * len(self.vessels)
         self._false: dict = {}  # track id -> seconds as a false moving vessel
+        self.walls, self.wall_m = tuple(walls), wall_m
+        self._on_wall: dict = {}  # track id -> seconds on a wall
+        self._ids = [None] * len(self.vessels)  # the id last matched to each vessel
+        self._switches = [0] * len(self.vessels)
+        self.saw_tracks = False
 
     def update(self, time_s: float, pose, tracks, dt: float) -> None:
+        self.saw_tracks = self.saw_tracks or bool(tracks)
         truth = [(v.pose_at(time_s), v.velocity_at(time_s)) for v in self.vessels]
         c, s = np.cos(pose[2]), np.sin(pose[2])
         for k, v in enumerate(self.vessels):
@@ -128,12 +140,18 @@ class TrackingWatch:
             dist = [np.hypot(*(p - vp[:2])) for vp, _ in truth]
             k = int(np.argmin(dist)) if dist else -1
             if k >= 0 and dist[k] <= self.match_m:
+                if self._ids[k] is not None and self._ids[k] != tr.id:
+                    self._switches[k] += 1
+                self._ids[k] = tr.id
                 self._pos_err.append(dist[k])
                 self._vel_err.append(float(np.hypot(*(np.asarray(tr.velocity) - truth[k][1]))))
                 if self.first_confirmed[k] is None:
                     self.first_confirmed[k] = time_s
-            elif getattr(tr, "moving", True):
-                self._false[tr.id] = self._false.get(tr.id, 0.0) + dt
+            else:
+                if getattr(tr, "moving", True):
+                    self._false[tr.id] = self._false.get(tr.id, 0.0) + dt
+                if self.walls and distance_to_polylines(p, self.walls)[0] <= self.wall_m:
+                    self._on_wall[tr.id] = self._on_wall.get(tr.id, 0.0) + dt
 
     def summary(self) -> dict:
         def rms(x):
@@ -145,4 +163,9 @@ class TrackingWatch:
                 "confirmed_after_visible_s": dict(zip((v.name for v in self.vessels), delays)),
                 "false_vessel_tracks": len(self._false),
                 "longest_false_vessel_s": round(max(self._false.values()), 3)
-                if self._false else 0.0}
+                if self._false else 0.0,
+                "wall_tracks": len(self._on_wall),
+                "longest_wall_track_s": round(max(self._on_wall.values()), 3)
+                if self._on_wall else 0.0,
+                "wall_track_time_s": round(sum(self._on_wall.values()), 3),
+                "id_switches": dict(zip((v.name for v in self.vessels), self._switches))}

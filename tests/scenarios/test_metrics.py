@@ -139,3 +139,45 @@ def test_an_episode_under_way_is_held_from_its_first_step_at_rest():
     out = waiting_episodes([True] * 6 + [False] * 3, speed, 0.1)
     assert out["time_waiting_s"] == pytest.approx(0.6)
     assert out["time_held_s"] == pytest.approx(0.3) and out["max_speed_while_held_mps"] == 0.06
+
+
+class _Stub:
+    """A vessel going north at 1 m/s from (0, 0)."""
+
+    name = "launch"
+
+    def pose_at(self, t):
+        return np.array([t, 0.0, 0.0])
+
+    def velocity_at(self, t):
+        return np.array([1.0, 0.0])
+
+    def outline_at(self, t):
+        return np.array([[t - 4, -1], [t + 4, -1], [t + 4, 1], [t - 4, 1]], float)
+
+
+def _track(id_, x, y, moving):
+    from types import SimpleNamespace
+
+    return SimpleNamespace(id=id_, position=(x, y), velocity=(0.0, 0.0), moving=moving)
+
+
+def test_tracks_on_walls_and_id_switches_are_counted():
+    """Issue 34 (3): a confirmed track on a wall is no boat, moving or not (its number, the
+    longest and the total time); a vessel whose track id changes has switched."""
+    from scenarios.results.encounters import TrackingWatch
+
+    wall = np.array([[-50.0, 10.0], [200.0, 10.0]])
+    watch = TrackingWatch([_Stub()], walls=[wall])
+    for k in range(30):
+        t = 0.1 * k
+        tracks = [_track(1 if k < 20 else 2, t, 0.0, True),  # the launch, then a new id
+                  _track(7, 30.0, 10.4, False)]  # a piece of the quay, static
+        if k < 5:
+            tracks.append(_track(8, 60.0, 9.2, True))  # another, moving, for 0.5 s
+        watch.update(t, np.array([-20.0, 0.0, 0.0]), tracks, 0.1)
+    out = watch.summary()
+    assert out["wall_tracks"] == 2
+    assert out["longest_wall_track_s"] == pytest.approx(3.0)
+    assert out["wall_track_time_s"] == pytest.approx(3.5)
+    assert out["id_switches"] == {"launch": 1}
