@@ -224,6 +224,19 @@ class HpipmOcpQp:
         self.slack = (np.ctypeslib.as_array((ctypes.c_double * ((N + 1) * ng)).from_address(
             address)).reshape(N + 1, ng) if address else None)
 
+    def share_arrays(self, other: "HpipmOcpQp") -> None:
+        """Read the blocks from `other`'s arrays and write the solution and status into
+        them (a QP of the same sizes): what is set there is what this one solves, once
+        `set` copies it in."""
+        names = ("A", "B", "b", "q", "r", "lbx", "ubx", "lbu", "ubu", "C", "lg", "ug", "x", "u")
+        for name in names + ("info", "res"):
+            mine, theirs = getattr(self, name), getattr(other, name)
+            if mine.shape != theirs.shape:
+                raise ValueError(f"HPIPM QPs of other sizes ({name})")
+            setattr(self, name, theirs)
+        self.lib.nmpc_qp_bind(self._handle, *(_ptr(getattr(self, n)) for n in names),
+                              self.info.ctypes.data_as(_c_int_p), _ptr(self.res))
+
     def set(self, what: int, first: int = 0, stop: int | None = None) -> None:
         """Copy the groups `what` (SET_ flags, summed) of stages first..stop-1 into the QP."""
         self._set(self._handle, what, first, self.N + 1 if stop is None else stop)

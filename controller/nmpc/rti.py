@@ -128,15 +128,22 @@ class QpStep:
         ocp, o = self.ocp, self.options
         N, nx, nu, nh = ocp.N, NX, NU, ocp.n_h
         self.bounded_states = np.array([6, 7, 8])  # nT, nS, slack
-        c = ocp.config
-        soft = c.obstacle_rows == "exact-penalty"
-        self.qp = HpipmOcpQp(N, nx, nu, nh, self.bounded_states, np.arange(nu),
-                             self.hessian[self.states_at], self.hessian[self.inputs_at],
-                             o.hpipm_mode, o.iter_max, o.tol, o.mu0, o.warm_start,
-                             choose_build(o.hpipm_build),
-                             soft_l1=c.obstacle_l1 if soft else 0.0,
-                             soft_l2=c.obstacle_l2 if soft else 0.0)
+        build = choose_build(o.hpipm_build)
+        args = (N, nx, nu, nh, self.bounded_states, np.arange(nu),
+                self.hessian[self.states_at], self.hessian[self.inputs_at], o.hpipm_mode,
+                o.iter_max, o.tol, o.mu0, o.warm_start, build)
+        self.qp = HpipmOcpQp(*args)
         self.qp.ug[:] = o.inf
+        # The elastic QP: the same blocks (it reads the hard QP's arrays) with the obstacle
+        # rows soft, solved only where the hard one fails (`_hpipm_result`). Elastic rows
+        # cost the IPM about three times the iterations, so they are not the default path;
+        # where the hard QP solves, the answer is exactly the hard one.
+        c = ocp.config
+        self.elastic_qp = None
+        if c.obstacle_rows == "exact-penalty":
+            self.elastic_qp = HpipmOcpQp(*args, soft_l1=c.obstacle_l1, soft_l2=c.obstacle_l2)
+            self.elastic_qp.share_arrays(self.qp)
+        self.elastic_used = False
         self._bind_hpipm()
         self._solve = self._solve_hpipm
 
@@ -145,6 +152,8 @@ class QpStep:
         horizon at w, and stage 0 alone (the feedback's part)."""
         qp, N, nx, nu = self.qp, self.ocp.N, NX, NU
         self._bound_qp = qp
+        if getattr(self, "elastic_qp", None) is not None:
+            self.elastic_qp.share_arrays(qp)
         self._hl_w, self._hl_p = np.zeros(self.ocp.nw), np.zeros(self.p.size)
         outs = [qp.b, qp.A, qp.B, qp.lg[1:], qp.C[1:]]
         self._hl_buf, self._hl = self._bind_out(self._hpipm_lin, [self._hl_w, self._hl_p], outs)
@@ -206,6 +215,13 @@ class QpStep:
     def _hpipm_result(self) -> tuple[np.ndarray, bool, str, int]:
         qp = self.qp
         status, iterations = qp.solve()
+        self.elastic_used = False
+        if status != 0 and self.elastic_qp is not None:  # no feasible point, or no
+            # convergence near one: the same QP with elastic obstacle rows, all of it set
+            self.elastic_qp.set(SET_DYNAMICS | SET_CONSTRAINTS | SET_BOUNDS | SET_GRADIENT)
+            status, more = self.elastic_qp.solve()
+            iterations += more
+            self.elastic_used = True
         dw = self._dw
         dw[self.states_at[1:]] = qp.x[1:]
         dw[self.inputs_at] = qp.u
@@ -273,11 +289,11 @@ class QpStep:
         return QpStepResult(dw, ok, status, iterations, t1 - t0, t2 - t1)
 
     def elastic(self) -> tuple[float, float]:
-        """How far the last QP's soft obstacle rows were violated, in units of h: the largest
-        slack over the horizon of the segment rows and of the vessel rows ((0, 0) when the
-        rows are hard: another QP solver, or `obstacle_rows = "hard"`)."""
-        qp = getattr(self, "qp", None)
-        if qp is None or qp.slack is None or self._solve != self._solve_hpipm:
+        """How far the last QP's obstacle rows were violated, in units of h: the largest
+        slack over the horizon of the segment rows and of the vessel rows; (0, 0) when the
+        hard QP solved (or the rows are hard: another QP solver, `obstacle_rows = "hard"`)."""
+        qp = getattr(self, "elastic_qp", None)
+        if qp is None or not self.elastic_used or self._solve != self._solve_hpipm:
             return 0.0, 0.0
         n_seg = 2 * self.ocp.config.segment_slots  # rows: both circles' segments, then vessels
         sl = qp.slack

@@ -256,15 +256,19 @@ def test_negative_weight_is_a_clear_error():
         NmpcController(NmpcConfig(r_diag=(1.0, -1.0)))
 
 
-def test_a_failing_qp_falls_back_then_reports_failure():
-    """hpipm stopped after one iteration: never passed on, shifted plan, then SolverError."""
+@pytest.mark.parametrize("rows", ["hard", "exact-penalty"])
+def test_a_failing_qp_falls_back_then_reports_failure(rows):
+    """hpipm stopped after one iteration: never passed on, shifted plan, then SolverError
+    (with elastic obstacle rows too: a QP that cannot finish is a numerical fault)."""
     canal = straight_canal(width_m=20.0)
     segs = canal.segments()
-    good = NmpcController(CFG, max_failures=3)
+    cfg = NmpcConfig(obstacle_rows=rows)
+    good = NmpcController(cfg, max_failures=3)
     first = good.step(X0, ACT0, segs, canal.waypoints, 2.0)
     assert first.stats.ok
-    # same controller state, a QP solver that cannot finish
-    good._qp.qp = NmpcController(CFG, qp=QpOptions(iter_max=1))._qp.qp
+    # same controller state, a QP solver that cannot finish (nor its elastic twin)
+    bad = NmpcController(cfg, qp=QpOptions(iter_max=1))._qp
+    good._qp.qp, good._qp.elastic_qp = bad.qp, bad.elastic_qp
     x, act = X0.copy(), first.command
     x[0] += 0.2
     second = good.step(x, act, segs, canal.waypoints, 2.0)
