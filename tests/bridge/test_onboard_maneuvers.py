@@ -101,6 +101,7 @@ def boat(lake, tmp_path):
         b.close()
 
 
+@pytest.mark.slow  # about 35 s: two sessions of manoeuvres on the simulated autopilot
 def test_a_staircase_and_a_zigzag_logged_twice_the_same(boat, lake, tmp_path):
     """Both logs say the same: the CSV from the telemetry and the autopilot's own .BIN over
     the window the session printed; the commands moved no faster than the actuators."""

@@ -1,0 +1,107 @@
+"""`canalnav fuzz --cases N --seed S --out DIR`: seeded random encounters, each written as a
+scenario file, run on the study engine and judged (`scenarios/studies/fuzz.py`).
+
+DIR gets `cases/` (the scenario files), the study's folder (`results.csv`, each run's
+folder under `runs/`), `fuzz.json` (the figures) and `report.md` (the failures worst first,
+each with the command that reproduces it; the rules of the road per encounter kind; every
+case). Prints the figures as JSON; exits 1 when a case failed the rule.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from scenarios.commands.arguments import whole_number
+
+
+def register(sub) -> None:
+    from scenarios.commands.sweep import add_engine_options
+
+    p = sub.add_parser(
+        "fuzz", help="seeded random encounters run and judged: no exception, collision or "
+        "controller failure, 2 m from every vessel (needs the [sweep] extra)",
+        description="Generate --cases encounter scenarios from --seed (canals 12-40 m wide with "
+        "a bend or a side canal, moored boats, currents, one to three vessels met, overtaken, "
+        "followed, crossing or drifting, timed to meet where it is hardest), run them on the "
+        "study engine and judge each from the true poses. The same seed gives the same cases.")
+    p.add_argument("--cases", type=whole_number(1), default=100, help="how many cases (100)")
+    p.add_argument("--seed", type=whole_number(0), default=0, help="the fuzz's seed (0)")
+    p.add_argument("--out", required=True, metavar="DIR", help="where cases and results go")
+    p.add_argument("--perception", choices=("mixed", "lidar", "known-walls"), default="mixed",
+                   help="each case's perception (mixed: drawn per case)")
+    p.add_argument("--min-hull-m", type=float, default=2.0,
+                   help="least hull-to-hull distance a case must keep (2 m)")
+    add_engine_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from controller.errors import InputError
+    from scenarios.commands.sweep import check_engine_options
+    from scenarios.studies.fuzz import conformance, generate, judge, report_markdown
+    from scenarios.studies.overrides import toml_value
+    from scenarios.studies.sweep import require_dask, run_study
+    from scenarios.studies.sweep_spec import parse_study
+
+    check_engine_options(args)
+    if not args.min_hull_m >= 0:
+        raise InputError(f"fuzz: --min-hull-m must be >= 0, got {args.min_hull_m}")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"fuzz: --out {out} is a file, not a folder")
+    require_dask()
+    cases = [generate(args.seed, k, args.perception) for k in range(args.cases)]
+    folder = out / "cases"
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"fuzz: cannot make {folder}: {exc.strerror}") from None
+    paths = []
+    for case in cases:
+        path = folder / f"{case.name}.toml"
+        path.write_text(case.text)
+        paths.append(str(path.resolve()))
+    text = (f"# canalnav fuzz: {args.cases} cases of seed {args.seed}\n[study]\n"
+            f"name = \"fuzz-{args.seed}\"\nscenarios = {toml_value(paths)}\n")
+    study = parse_study(text, out.resolve() / "fuzz-study.toml")
+    outcome = run_study(study, out / "study", scheduler=args.scheduler, workers=args.workers,
+                        resume=args.resume, progress=not args.quiet,
+                        timeout_s=args.connect_timeout)
+    by_case = {case.name: case for case in cases}
+    summaries, verdicts = {}, []
+    for row in outcome.rows:
+        name = Path(str(row.get("scenario_file", ""))).stem
+        if name not in by_case:
+            continue
+        summary_path = out / "study" / str(row.get("folder", "")) / "summary.json"
+        summary = json.loads(summary_path.read_text()) if summary_path.is_file() else None
+        summaries[name] = summary
+        verdicts.append(judge(name, row, summary, args.min_hull_m))
+    conform = conformance(cases, summaries)
+    (out / "report.md").write_text(report_markdown(verdicts, by_case, str(out), args.seed,
+                                                   conform, outcome.wall_s))
+    hulls = [v.min_hull_m for v in verdicts if v.min_hull_m is not None]
+    figures = {
+        "seed": args.seed, "cases": len(cases), "ran": len(verdicts),
+        "failed": sum(not v.passed for v in verdicts),
+        "exceptions": sum(v.severity == 5 for v in verdicts),
+        "controller_failures": sum(v.severity == 4 for v in verdicts),
+        "collisions": sum(v.severity == 3 for v in verdicts),
+        "closer_than_min_hull": sum(v.severity == 2 for v in verdicts),
+        "least_hull_to_hull_m": round(min(hulls), 3) if hulls else None,
+        "reached_goal": sum(v.reached_goal for v in verdicts),
+        "reached_goal_share": round(sum(v.reached_goal for v in verdicts)
+                                    / max(len(verdicts), 1), 4),
+        "fallback_steps": sum(v.fallback_steps for v in verdicts),
+        "elastic_steps": sum(v.elastic_steps for v in verdicts),
+        "wall_tracks": sum(v.wall_tracks for v in verdicts),
+        "rules": conform, "wall_time_s": round(outcome.wall_s, 1),
+        "workers": outcome.workers, "report": str(out / "report.md"),
+        "failures": [{"case": v.case, "why": v.why,
+                      "command": f"canalnav run {out}/cases/{v.case}.toml"}
+                     for v in sorted(verdicts, key=lambda v: -v.severity) if not v.passed],
+    }
+    (out / "fuzz.json").write_text(json.dumps(figures, indent=2) + "\n")
+    print(json.dumps(figures, indent=2))
+    return 0 if figures["failed"] == 0 and len(verdicts) == len(cases) else 1

@@ -1,0 +1,76 @@
+"""`canalnav fuzz` (issue 34): seeded encounters written as ordinary scenario files, judged
+by what must never happen."""
+
+import collections
+import json
+
+import pytest
+
+from bridge.main import main
+from scenarios.scenario_file import parse_scenario
+from scenarios.studies.fuzz import KINDS, conformance, generate, judge, report_markdown
+
+
+def test_the_same_seed_gives_the_same_cases_and_another_seed_others():
+    assert [generate(3, k).text for k in range(5)] == [generate(3, k).text for k in range(5)]
+    assert generate(3, 0).text != generate(4, 0).text
+
+
+def test_every_case_is_a_valid_scenario_and_every_kind_and_place_comes_up():
+    kinds, places, widths = collections.Counter(), collections.Counter(), []
+    for k in range(60):
+        case = generate(11, k)
+        scenario = parse_scenario(case.text, f"{case.name}.toml")  # raises if invalid
+        assert len(scenario.world.vessels) == len(case.kinds) >= 1
+        assert {v.name for v in scenario.world.vessels} == set(case.vessels)
+        kinds.update(case.kinds)
+        places[case.place] += 1
+        widths.append(case.width_m)
+    assert set(kinds) == set(KINDS)
+    assert {"bend", "junction"} <= set(places)
+    assert 12.0 <= min(widths) and max(widths) <= 40.0
+
+
+def test_perception_can_be_fixed():
+    assert {generate(2, k, "known-walls").perception for k in range(10)} == {"known-walls"}
+
+
+ROW = {"status": "ok", "collision": False, "controller_failed": False}
+
+
+@pytest.mark.parametrize("row, summary, severity", [
+    (ROW, {"reached_goal": True, "vessels": [{"min_hull_distance_m": 4.0}]}, 0),
+    (ROW, {"reached_goal": True, "vessels": [{"min_hull_distance_m": 1.5}]}, 2),
+    ({**ROW, "collision": True}, {"status": "collision at t = 3.0 s"}, 3),
+    ({**ROW, "controller_failed": True}, {"status": "controller failed: x"}, 4),
+    ({"status": "error", "error": "boom"}, None, 5),
+])
+def test_the_judge_ranks_what_went_wrong(row, summary, severity):
+    v = judge("case-0000", row, summary)
+    assert v.severity == severity and v.passed == (severity == 0)
+
+
+def test_the_report_lists_failures_worst_first_with_the_command():
+    cases = {c.name: c for c in (generate(5, 0), generate(5, 1))}
+    verdicts = [judge("case-0000", {**ROW, "collision": True}, {"status": "collision"}),
+                judge("case-0001", {**ROW, "controller_failed": True}, {"status": "cf"})]
+    md = report_markdown(verdicts, cases, "OUT", 5, conformance(list(cases.values()), {}), 1.0)
+    first, second = md.index("case-0001 | controller failed"), md.index("case-0000 | collision")
+    assert first < second and "`canalnav run OUT/cases/case-0000.toml`" in md
+
+
+@pytest.mark.slow
+def test_fuzz_runs_cases_and_writes_its_report(tmp_path, capsys):
+    status = main(["fuzz", "--cases", "2", "--seed", "1", "--out", str(tmp_path / "f"),
+                   "--workers", "1", "--perception", "known-walls", "--quiet"])
+    figures = json.loads(capsys.readouterr().out)
+    assert figures["ran"] == 2 and status == (0 if figures["failed"] == 0 else 1)
+    assert (tmp_path / "f" / "report.md").read_text().startswith("# canalnav fuzz, seed 1")
+    assert len(list((tmp_path / "f" / "cases").glob("*.toml"))) == 2
+
+
+def test_fuzz_names_a_bad_out(tmp_path, capsys):
+    bad = tmp_path / "file"
+    bad.write_text("x")
+    assert main(["fuzz", "--cases", "1", "--out", str(bad)]) != 0
+    assert "is a file" in capsys.readouterr().err
