@@ -23,6 +23,11 @@ def test_encounter_ends_without_a_controller_failure(path, perception, tmp_path)
     assert not summary["status"].startswith("controller failed"), summary["status"]
     assert not summary["collision"], summary["status"]
     failed = check_criteria(scenario, summary)
+    if perception == "lidar" and path.stem == "workboat_from_port":
+        # Known, open (issue 34): with the LiDAR the workboat passes 2.40 m hull to hull
+        # at seed 0, under the file's 3 m. Strict: the day it passes, this says so.
+        pytest.xfail("; ".join(failed)) if failed else pytest.fail(
+            "workboat_from_port with the LiDAR now meets its criteria: drop this xfail")
     assert not failed, "; ".join(failed)
 
 
