@@ -58,6 +58,9 @@ def register(sub) -> None:
     p.add_argument("--all-terms", action="store_true",
                    help="fit every sway-yaw term at once instead of adding the quadratic and "
                    "cross terms one at a time when the data determine them")
+    p.add_argument("--select-se", type=float, default=None, metavar="T",
+                   help="keep an optional sway-yaw term only when its estimate exceeds T "
+                   "standard errors (default 3.14: a family-wise 1 %% over the six terms)")
     p.add_argument("--noise-model", choices=("ar1", "fixed"), default="ar1",
                    help="ar1 (default): a second pass weighting each channel by its residual "
                    "noise, AR(1)-whitened; fixed: the paper's W only")
@@ -94,8 +97,9 @@ def _config(args):
         if not (math.isfinite(value) and value > 0):
             raise InputError(f"--{name}: must be a positive number, got {value!r}")
     dims = BoatDimensions(mass_kg=args.mass, length_m=args.length, breadth_m=args.breadth)
+    extra = {} if args.select_se is None else {"select_se": args.select_se}
     return SysidConfig(dimensions=dims, fixed=dict(args.fix), select=not args.all_terms,
-                       noise_model=args.noise_model, max_cpu_s=args.time_limit)
+                       noise_model=args.noise_model, max_cpu_s=args.time_limit, **extra)
 
 
 def run(args) -> int:

@@ -28,9 +28,11 @@ One zigzag at one speed does not separate the quadratic and cross sway-yaw terms
 linear ones (with realistic noise their standard errors exceed their size, and fitting them
 all at once trades Y_v against Y_v|v| and N_r against N_r|r|). So the sway-yaw stage fits the
 linear core m22 m33 Yv Nr first, then tries each optional term (OPTIONAL_TERMS) in turn and
-keeps it only if its estimate exceeds two standard errors (forward selection); the others stay
-0 and are reported with the trial fit's estimate and standard error. `select=False` fits all
-ten at once.
+keeps it only if its estimate exceeds SELECT_T standard errors (forward selection); the others
+stay 0 and are reported with the trial fit's estimate and standard error. `select=False` fits
+all ten at once. SELECT_T is 3.14, a family-wise 1 % over the six tries (Bonferroni): at two
+standard errors each, six tries let a term that is not there in about a quarter of the time,
+and on EKF logs such a term (a cross term of 3 SE on a boat that has none) takes Y_v with it.
 
 Scale: the model is unchanged when every force-like parameter is multiplied by one factor, so
 logs fix the parameters only up to that factor. One surge parameter anchors it: by default m11,
@@ -48,6 +50,7 @@ import math
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from statistics import NormalDist
 
 import numpy as np
 
@@ -70,7 +73,10 @@ POOR_RELATIVE_SE = 0.25
 OPTIONAL_TERMS = ("Yvv", "Nrr", "Yr", "Nv", "Yrr", "Nvv")
 """Sway-yaw terms beyond the linear diagonal core (m22 m33 Yv Nr), added one at a time in
 this order and kept only when the data tell them from zero (forward selection)."""
-SELECT_T = 2.0
+FAMILY_ALPHA = 0.01
+SELECT_T = NormalDist().inv_cdf(1.0 - FAMILY_ALPHA / (2 * len(OPTIONAL_TERMS)))
+"""An optional term is kept when |estimate| > SELECT_T standard errors (3.14): the chance that
+any of the six, none of them really there, gets in is then at most FAMILY_ALPHA."""
 NOISE_MODELS = ("ar1", "fixed")
 RHO_MAX = 0.999
 """AR(1) noise model: a residual channel's lag-one correlation is kept below this."""
@@ -168,6 +174,7 @@ class SysidConfig:
     max_iter: int = 300
     tol: float = 1e-8
     select: bool = True  # forward selection of OPTIONAL_TERMS; False fits all at once
+    select_se: float = SELECT_T  # an optional term is kept when |estimate| > this many SE
     noise_model: str = "ar1"  # "ar1": residuals whitened and weighted by their noise; "fixed": W
     max_cpu_s: float = 1800.0  # CPU time of all solves together: then a clear SolverError
 
@@ -180,6 +187,9 @@ class SysidConfig:
         if self.noise_model not in NOISE_MODELS:
             raise InputError(f"--noise-model {self.noise_model!r}: expected one of "
                              f"{', '.join(NOISE_MODELS)}")
+        if not (math.isfinite(self.select_se) and self.select_se > 0):
+            raise InputError(f"--select-se must be a positive number of standard errors, got "
+                             f"{self.select_se!r}")
         if not (math.isfinite(self.max_cpu_s) and self.max_cpu_s > 0):
             raise InputError(f"--time-limit must be a positive number of seconds, got "
                              f"{self.max_cpu_s!r}")
@@ -921,7 +931,7 @@ def identify(logs: Sequence[ManeuverLog], config: SysidConfig = SysidConfig()) -
                 passes.append(sol.report)
         free = list(core)
         for i, n in enumerate(extras):
-            # forward selection: keep a term only if the data tell it from zero (> 2 SE)
+            # forward selection: keep a term only if the data tell it from zero (> select_se SE)
             try:
                 trial = _solve_stage(stage, datas, free + [n],
                                      sol.params.replace(**{n: getattr(start, n)}), scales,
@@ -940,7 +950,7 @@ def identify(logs: Sequence[ManeuverLog], config: SysidConfig = SysidConfig()) -
             passes.append(trial.report)
             value = getattr(trial.params, n)
             sd = math.sqrt(max(trial.cov_theta[-1, -1], 0.0))
-            if abs(value) > SELECT_T * sd:
+            if abs(value) > config.select_se * sd:
                 sol, free = trial, free + [n]
             else:
                 dropped[n] = (value, sd)
@@ -954,7 +964,7 @@ def identify(logs: Sequence[ManeuverLog], config: SysidConfig = SysidConfig()) -
             roles[n] = "left out"
             se[n] = sd
             det[n] = (f"not determined (trial fit {value:.4g} ± {sd:.3g}, "
-                      f"< {SELECT_T:g} SE): kept at 0")
+                      f"< {config.select_se:.3g} SE): kept at 0")
         for n, why in failed.items():
             roles[n] = "left out"
             det[n] = f"not determined (the trial fit with it failed: {why}): kept at 0"

@@ -64,6 +64,9 @@ def test_missing_file_and_bad_fix(tmp_path, capsys):
         main(["sysid", "x.csv", "--fix", "m11"])
     assert exc.value.code == 2
     assert "NAME=VALUE" in capsys.readouterr().err
+    assert main(["sysid", "x.csv", "--select-se", "0"]) == 2
+    err = capsys.readouterr().err
+    assert "--select-se" in err and "Traceback" not in err
 
 
 @pytest.mark.slow

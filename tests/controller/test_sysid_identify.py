@@ -127,6 +127,37 @@ def test_unknown_fixed_parameter_is_refused():
         sysid.SysidConfig(fixed={"m44": 1.0})
 
 
+@pytest.mark.parametrize("value", [0.0, -1.0, math.inf, math.nan])
+def test_a_selection_threshold_that_is_not_a_positive_number_is_refused(value):
+    with pytest.raises(InputError, match="--select-se"):
+        sysid.SysidConfig(select_se=value)
+
+
+def test_the_selection_threshold_decides_which_optional_terms_stay(logs, result):
+    """Each term left out by the default rule was tried from the same core fit: a threshold
+    just under the largest trial t value keeps that term; one of 1e6 SE keeps none."""
+    rows = {r.name: r for r in result.parameters}
+    left_out = [n for n in sysid.OPTIONAL_TERMS if rows[n].role == "left out"]
+    assert left_out == list(sysid.OPTIONAL_TERMS), "the default keeps no term on these logs"
+    for name in left_out:
+        assert f"< {sysid.SELECT_T:.3g} SE" in rows[name].note, name
+    t = {}
+    for name in left_out:
+        value = float(rows[name].note.split("trial fit ")[1].split(" ±")[0])
+        t[name] = abs(value) / rows[name].std_error
+    best = max(t, key=t.get)
+    looser = sysid.identify(list(logs.values()), sysid.SysidConfig(select_se=0.999 * t[best]))
+    kept = {r.name: r for r in looser.parameters}
+    assert kept[best].role == "estimated" and kept[best].estimate != 0.0
+    for name in sysid.OPTIONAL_TERMS[:sysid.OPTIONAL_TERMS.index(best)]:
+        assert kept[name].role == "left out", name
+    strict = sysid.identify(list(logs.values()), sysid.SysidConfig(select_se=1e6))
+    rows = {r.name: r for r in strict.parameters}
+    for name in sysid.OPTIONAL_TERMS:
+        assert rows[name].role == "left out" and rows[name].estimate == 0.0, name
+        assert "< 1e+06 SE" in rows[name].note, name
+
+
 def test_identification_is_deterministic():
     log = m.generate(seed=4, noise="realistic", runs=(m.QUICK_RUNS[1],))["02_deceleration"]
     config = sysid.SysidConfig(fixed={"m22": 1800.0})
