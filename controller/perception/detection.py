@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -104,6 +104,19 @@ def detect_segments(points, pose, config: DetectionConfig = DEFAULT) -> np.ndarr
     theta = _half_turn(body[:, 2] + psi)
     out = np.column_stack([xc, yc, theta, body[:, 3]])
     return out[np.argsort(-out[:, 3], kind="stable")]
+
+
+ASTERN_MPS = -0.1
+"""Below this surge speed (m/s) the boat goes astern (`for_surge`)."""
+
+
+def for_surge(config: DetectionConfig, surge_mps: float) -> DetectionConfig:
+    """The config to crop with at a surge speed: going astern there is no wake behind the
+    hull, and what lies behind is where the boat goes, so the wake's box (which would hide
+    the wall it backs towards) is not cropped."""
+    if surge_mps < ASTERN_MPS and config.wake_length_m > 0.0:
+        return replace(config, wake_length_m=0.0)
+    return config
 
 
 def crop_mask(points, config: DetectionConfig = DEFAULT) -> np.ndarray:

@@ -10,12 +10,13 @@ when the boat has been blind too long.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..errors import CanalnavError
-from .detection import DEFAULT, DetectionConfig, detect_segments
+from .detection import DEFAULT, DetectionConfig, detect_segments, for_surge
 from .feed import FeedConfig, Percept, PerceptionView, SegmentFeed
 from .tracking import TrackerConfig, VesselTracker
 
@@ -49,7 +50,11 @@ class ScanPipeline:
     def update(self, time_s: float, points, pose) -> PerceptionView:
         """The view for this period from `points` ((N, 3) body frame, x fwd, y stbd, z down,
         or None) taken at the boat's `pose` (x, y, psi[, ...]) in the world frame."""
-        pose = np.asarray(pose, float).reshape(-1)[:3]
+        pose = np.asarray(pose, float).reshape(-1)
+        detection = self.config.detection
+        if len(pose) >= 4 and math.isfinite(pose[3]):  # the state: astern, no wake crop
+            detection = for_surge(detection, float(pose[3]))
+        pose = pose[:3]
         found = None
         fresh = points is not None and points is not self._last_points
         self._last_points = points
@@ -59,7 +64,7 @@ class ScanPipeline:
         else:
             try:
                 points = _usable_cloud(points)
-                found = detect_segments(points, pose, self.config.detection)
+                found = detect_segments(points, pose, detection)
             except (CanalnavError, ValueError, TypeError, IndexError) as exc:
                 self.counts["failed"] += 1
                 self.last_failure = str(exc)

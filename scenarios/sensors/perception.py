@@ -167,9 +167,12 @@ class LidarPerception:
             # Detection's crop lies inside the tracker's when they share the detection
             # config: detecting in the tracker's returns gives the same segments, with
             # one pass over the whole cloud instead of two.
-        found = detect_segments(points if crop and self.tracking.detection == self.detection
-                                else full, np.asarray(estimated_state, float)[:3],
-                                self.detection)
+        from controller.perception.detection import for_surge
+
+        est = np.asarray(estimated_state, float).reshape(-1)
+        detection = for_surge(self.detection, float(est[3])) if len(est) > 3 else self.detection
+        found = detect_segments(points if crop and self.tracking.detection == detection
+                                else full, np.asarray(estimated_state, float)[:3], detection)
         self.time_s["lidar_scan"] += t1 - t0
         self.time_s["detection"] += time.perf_counter() - t1
         self.time_s["lidar_scan_cpu"] += c1 - c0

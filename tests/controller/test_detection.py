@@ -258,3 +258,11 @@ def test_near_chords_and_principal_match_simple_references():
     major = v[:, np.argmax(w)]
     assert (cx, cy) == pytest.approx(tuple(line.mean(axis=0)), abs=1e-12)
     assert abs(vx * major[1] - vy * major[0]) < 1e-9 and math.hypot(vx, vy) == pytest.approx(1.0)
+
+
+def test_going_astern_the_wake_box_is_not_cropped():
+    from controller.perception.detection import DEFAULT, for_surge
+
+    assert for_surge(DEFAULT, 2.0) is DEFAULT and for_surge(DEFAULT, -0.05) is DEFAULT
+    astern = for_surge(DEFAULT, -0.5)
+    assert astern.wake_length_m == 0.0 and astern.hull_x_m == DEFAULT.hull_x_m

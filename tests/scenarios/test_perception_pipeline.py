@@ -144,3 +144,24 @@ perception = "lidar"
         perception.segments(0.0, np.array([20.0, 0, 0, 2.0, 0, 0]), np.array([20.0, 0, 0]))
         counts.append(perception.points_per_scan[-1])
     assert 0.4 < counts[1] / counts[0] * 0.97 < 0.6
+
+
+def test_going_astern_the_wall_behind_is_detected_not_cropped_as_wake():
+    """Ahead, the box behind the stern is the wake's (spray, foam) and is cropped; astern it
+    is where the boat goes: a quay end 8 m astern across the canal must become a segment."""
+    from scenarios.world.canal import Obstacle
+
+    quay = Obstacle([[-13.0, -8.0], [-12.0, -8.0], [-12.0, 8.0], [-13.0, 8.0]], z_top_m=1.5,
+                    name="quay end")
+    centre = np.column_stack([np.linspace(-60, 150, 106), np.zeros(106)])
+    canal = CanalWorld.from_centre_line(centre, 20.0, obstacles=(quay,))
+
+    def astern_segments(u):
+        p = LidarPerception(canal, seed=1, tracking=False)
+        state = np.array([0.0, 0.0, 0.0, u, 0.0, 0.0])
+        segs = p.segments(0.0, state, state)
+        mid = segs[:, :2] if segs is not None else np.zeros((0, 2))
+        return np.count_nonzero((np.abs(mid[:, 0] + 12.5) < 1.5) & (np.abs(mid[:, 1]) < 4.0))
+
+    assert astern_segments(2.0) == 0  # ahead: cropped with the wake
+    assert astern_segments(-0.5) >= 1  # astern: seen
