@@ -136,7 +136,8 @@ class _Canal:
         if not self.junction:
             return ["[canal]", f"centre_line = {_points([[0, 0], self.corner, end])}",
                     f"width_m = {self.width}", f"corner_radius_m = {max(self.width, 20.0)}", "",
-                    "[route]", f"waypoints = {_points([[0, 0], self.at(self.route_length)])}",
+                    "[route]",  # along the centre line, round the bend
+                    f"waypoints = {_points([[0, 0], self.corner, self.at(self.route_length)])}",
                     ""]
         h, a, b = self.width / 2, self.leg - self.mouth_m / 2, self.leg + self.mouth_m / 2
         far = 60.0 * self.side

@@ -4,6 +4,7 @@ by what must never happen."""
 import collections
 import json
 
+import numpy as np
 import pytest
 
 from bridge.main import main
@@ -74,3 +75,17 @@ def test_fuzz_names_a_bad_out(tmp_path, capsys):
     bad.write_text("x")
     assert main(["fuzz", "--cases", "1", "--out", str(bad)]) != 0
     assert "is a file" in capsys.readouterr().err
+
+
+def test_the_route_keeps_to_the_water():
+    """The route goes round the bend along the centre line (a straight route across the
+    bend's inside would cut the land, and no boat could follow it)."""
+    from controller.geometry import distance_to_polylines
+
+    for k in range(20):
+        case = generate(7, k, "known-walls")
+        scenario = parse_scenario(case.text, f"{case.name}.toml")
+        pts = np.asarray(scenario.waypoints, float)
+        along = np.concatenate([np.linspace(a, b, 50) for a, b in zip(pts[:-1], pts[1:])])
+        d = distance_to_polylines(along, scenario.world.wall_polylines())
+        assert d.min() > 0.3 * case.width_m - 1.0, (case.name, d.min())
