@@ -6,26 +6,27 @@
  * indices (ascending) and their x and y; returns how many. */
 #include <stdint.h>
 
+/* Whether a point is kept: in the band, within range, outside the hull's and the wake's
+ * boxes (the thresholds as the macros below declare them). */
+#define KEEP(x, y, z, ay)                                                                   \
+    ((z) <= hi && (z) >= lo && (x) >= nr && (x) <= r && (ay) <= r                           \
+     && !((x) >= x0 && (x) <= x1 && (ay) <= hw) && !((x) >= wx0 && (x) < x0 && (ay) <= ww))
+
+#define THRESHOLDS(T)                                                                       \
+    T lo = (T)(-max_h_d), hi = (T)(-min_h_d), r = (T)range_d, nr = (T)(-range_d);           \
+    T x0 = (T)x0_d, x1 = (T)x1_d, hw = (T)hull_w_d, wx0 = (T)wake_x0_d, ww = (T)wake_w_d;
+
 #define CROP(NAME, T)                                                                       \
     int64_t NAME(int64_t n, const T *p, int64_t row, int64_t col, double min_h_d,          \
                  double max_h_d, double range_d, double x0_d, double x1_d, double hull_w_d, \
                  double wake_x0_d, double wake_w_d, int64_t *idx, T *xo, T *yo)            \
     {                                                                                       \
-        T lo = (T)(-max_h_d), hi = (T)(-min_h_d), r = (T)range_d, nr = (T)(-range_d);       \
-        T x0 = (T)x0_d, x1 = (T)x1_d, hw = (T)hull_w_d, wx0 = (T)wake_x0_d;                 \
-        T ww = (T)wake_w_d;                                                                 \
+        THRESHOLDS(T)                                                                       \
         int64_t m = 0;                                                                      \
         for (int64_t i = 0; i < n; i++) {                                                   \
-            T z = p[i * row + 2 * col];                                                     \
-            if (!(z <= hi && z >= lo))                                                      \
-                continue;                                                                   \
-            T x = p[i * row], y = p[i * row + col];                                         \
+            T x = p[i * row], y = p[i * row + col], z = p[i * row + 2 * col];               \
             T ay = y < 0 ? -y : y;                                                          \
-            if (!(x >= nr && x <= r && ay <= r))                                            \
-                continue;                                                                   \
-            if (x >= x0 && x <= x1 && ay <= hw)                                             \
-                continue;                                                                   \
-            if (x >= wx0 && x < x0 && ay <= ww)                                             \
+            if (!KEEP(x, y, z, ay))                                                         \
                 continue;                                                                   \
             idx[m] = i;                                                                     \
             xo[m] = x;                                                                      \
@@ -45,21 +46,12 @@ CROP(crop_f64, double)
                  double max_h_d, double range_d, double x0_d, double x1_d, double hull_w_d, \
                  double wake_x0_d, double wake_w_d, T *out)                                 \
     {                                                                                       \
-        T lo = (T)(-max_h_d), hi = (T)(-min_h_d), r = (T)range_d, nr = (T)(-range_d);       \
-        T x0 = (T)x0_d, x1 = (T)x1_d, hw = (T)hull_w_d, wx0 = (T)wake_x0_d;                 \
-        T ww = (T)wake_w_d;                                                                 \
+        THRESHOLDS(T)                                                                       \
         int64_t m = 0;                                                                      \
         for (int64_t i = 0; i < n; i++) {                                                   \
-            T z = p[i * row + 2 * col];                                                     \
-            if (!(z <= hi && z >= lo))                                                      \
-                continue;                                                                   \
-            T x = p[i * row], y = p[i * row + col];                                         \
+            T x = p[i * row], y = p[i * row + col], z = p[i * row + 2 * col];               \
             T ay = y < 0 ? -y : y;                                                          \
-            if (!(x >= nr && x <= r && ay <= r))                                            \
-                continue;                                                                   \
-            if (x >= x0 && x <= x1 && ay <= hw)                                             \
-                continue;                                                                   \
-            if (x >= wx0 && x < x0 && ay <= ww)                                             \
+            if (!KEEP(x, y, z, ay))                                                         \
                 continue;                                                                   \
             out[3 * m] = x;                                                                 \
             out[3 * m + 1] = y;                                                             \

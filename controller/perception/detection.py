@@ -23,7 +23,6 @@ import numpy as np
 from ..errors import InputError
 from ..kernels import pointer
 from .cloud_crop import crop_kernel, occupancy_kernel
-from ..geometry import point_segment_distance
 
 
 @dataclass(frozen=True)

@@ -217,7 +217,7 @@ def _vessel(kind: str, k: int, canal: _Canal, rng, place: str) -> tuple[str, flo
     course = math.degrees(canal.heading(s_meet)) + (90.0 if y < 0 else -90.0) + float(
         rng.uniform(-30.0, 30.0))
     v = float(rng.uniform(0.3, 0.7))
-    lines = [f"[[vessel]]", f"name = {toml_value(name)}", "[vessel.hull]", "length_m = 3.5",
+    lines = ["[[vessel]]", f"name = {toml_value(name)}", "[vessel.hull]", "length_m = 3.5",
              "beam_m = 0.8", "height_m = 0.6", 'shape = "pointed"', "[vessel.course]",
              f"x_m = {p[0]:.2f}", f"y_m = {p[1]:.2f}", f"course_deg = {course:.1f}",
              f"speed_mps = {v:.2f}", f"start_s = {max(0.0, t_meet - 20.0):.1f}",
