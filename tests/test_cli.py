@@ -63,3 +63,17 @@ def test_whole_number_options_name_the_option_and_the_bound(capsys):
         assert exit_.value.code == 2
         err = capsys.readouterr().err
         assert message in err and "Traceback" not in err
+
+
+def test_an_out_folder_under_a_file_and_a_figure_in_no_folder_are_named(tmp_path, capsys):
+    """Issue 35's tracebacks: `run --out` where a parent is a file, `detect -o` into a folder
+    that is not there: one line naming the option and the path."""
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    straight = Path(__file__).resolve().parents[1] / "scenarios" / "straight.toml"
+    assert main(["run", str(straight), "--out", str(blocker / "sub"),
+                 "--no-plots"]) == 2
+    assert f"--out {blocker / 'sub'}: cannot make the folder" in capsys.readouterr().err
+    missing = tmp_path / "nowhere" / "d.png"
+    assert main(["detect", "--at", "10", "-o", str(missing)]) == 2
+    assert f"-o {missing}: cannot write the figure" in capsys.readouterr().err

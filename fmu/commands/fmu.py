@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+from pathlib import Path
 
 
 def register(sub) -> None:
@@ -56,7 +58,14 @@ def run_check(args) -> int:
     from controller.errors import InputError
     from fmu.check import CHECKS, check_fmu
 
-    problems = check_fmu(args.fmu)
+    # fmpy changes into the FMU's folder to load its binary and, when that fails, leaves the
+    # process in a folder it then deletes: the path is made absolute and the folder restored
+    cwd = os.getcwd()
+    path = str(Path(args.fmu).resolve())
+    try:
+        problems = check_fmu(path)
+    finally:
+        os.chdir(cwd)
     for problem in problems:
         print(f"{args.fmu}: {problem}")
     if not problems:
@@ -72,7 +81,16 @@ def run_check(args) -> int:
                 raise InputError(f"--step: must be positive, got {step!r}")
         report = {}
         for step in steps:
-            result = compare(args.fmu, step)
+            try:
+                result = compare(path, step)
+            except InputError:
+                raise
+            except Exception as exc:  # a binary that does not load or run: fmpy's own errors
+                problems.append(f"comparison at step {step:g} failed: {exc}")
+                print(f"{args.fmu}: comparison at step {step:g} failed: {exc}")
+                continue
+            finally:
+                os.chdir(cwd)
             worst = max(result.values(), key=lambda r: r["relative"])["relative"]
             report[f"{step:g}"] = {
                 "worst_relative_error": float(f"{worst:.3g}"),

@@ -137,5 +137,11 @@ def draw(path, world, sim, pose, scan, keep, segments, config, title="", hull=No
     ax_map.legend(loc="lower right", fontsize=8)
     if title:
         fig.suptitle(title)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        fig.savefig(path, dpi=110)
+    except OSError as exc:  # a folder that is not there, a read-only one
+        from controller.errors import InputError
+
+        raise InputError(f"-o {path}: cannot write the figure: {exc.strerror or exc}") from None
+    finally:
+        plt.close(fig)

@@ -140,7 +140,11 @@ def run_scenario(scenario: Scenario, out_dir: Path, controller: str | None = Non
                          f"that changes along the canal needs the fmu or python-model plant, "
                          f"not {plant}")
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:  # a parent that is a file, a folder without write permission
+        raise InputError(f"--out {out_dir}: cannot make the folder: {exc.strerror or exc}"
+                         ) from None
     seed = scenario.seed if seed is None else seed
     if seed != scenario.seed:
         from dataclasses import replace

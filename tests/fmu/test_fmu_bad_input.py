@@ -1,5 +1,7 @@
 """Bad input gets an FMI error with a message naming the variable and value; never NaN outputs."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -99,3 +101,22 @@ def test_bench_rejects_bad_options(capsys):
 def test_check_rejects_a_non_positive_compare_step(fmus, capsys):
     assert main(["fmu", "check", str(fmus[2]), "--compare", "--step", "-1"]) == 2
     assert "--step" in capsys.readouterr().err
+
+
+def test_check_compare_of_an_fmu_whose_binary_does_not_load(fmus, tmp_path, capsys,
+                                                            monkeypatch):
+    """A broken binary inside: the check and the comparison each report it on a line, the
+    exit status is 1, no traceback; a relative path still works after fmpy's failed load
+    (which left the process in a deleted folder)."""
+    import zipfile
+
+    bad = tmp_path / "bad.fmu"
+    with zipfile.ZipFile(fmus[2]) as src, zipfile.ZipFile(bad, "w") as dst:
+        for info in src.infolist():
+            data = src.read(info.filename)
+            dst.writestr(info, b"garbage" * 10 if info.filename.endswith(".so") else data)
+    monkeypatch.chdir(tmp_path)
+    assert main(["fmu", "check", "bad.fmu", "--compare", "--step", "1.0"]) == 1
+    out = capsys.readouterr().out
+    assert "bad.fmu: comparison at step 1 failed" in out and "ELF" in out
+    assert Path.cwd() == tmp_path
