@@ -27,45 +27,11 @@ def register(sub) -> None:
                    help="a detection setting (controller.perception.detection.DetectionConfig, "
                    "e.g. max_height_m=1.2, hough_votes=8, hull_x_m=-5,5); repeatable")
     p.add_argument("--csv", metavar="FILE",
-                   help="with --lidar: also write the detected segments (boat frame: x_c_m, "
-                   "y_c_m, theta_rad, length_m) to FILE")
+                   help="also write the detected segments (boat frame: x_c_m, y_c_m, "
+                   "theta_rad, length_m) to FILE")
     simulated = p.get_default("func")
     p.set_defaults(func=lambda args: run(args) if args.lidar or args.lidar_config
                    else simulated(args))
-
-
-def detection_config(settings):
-    """DetectionConfig with NAME=VALUE settings; InputError names a bad one."""
-    import dataclasses
-
-    from controller.errors import InputError
-    from controller.perception.detection import DEFAULT
-
-    fields = {f.name: f for f in dataclasses.fields(DEFAULT)}
-    changes = {}
-    for text in settings:
-        name, sep, value = text.partition("=")
-        name = name.strip()
-        if not sep or name not in fields:
-            raise InputError(f"--detect-set {text!r}: expected NAME=VALUE with NAME one of "
-                             f"{', '.join(sorted(fields))}")
-        old = getattr(DEFAULT, name)
-        try:
-            if isinstance(old, tuple):
-                new = tuple(float(v) for v in value.split(","))
-                if len(new) != len(old):
-                    raise ValueError
-            else:
-                new = type(old)(float(value)) if not isinstance(old, bool) else value == "true"
-        except ValueError:
-            raise InputError(f"--detect-set {text!r}: {name} takes "
-                             f"{'numbers a,b' if isinstance(old, tuple) else 'a number'} "
-                             f"(now {old!r})") from None
-        changes[name] = new
-    try:
-        return dataclasses.replace(DEFAULT, **changes)
-    except (ValueError, InputError) as exc:
-        raise InputError(f"--detect-set: {exc}") from None
 
 
 def run(args) -> int:
@@ -77,7 +43,9 @@ def run(args) -> int:
 
     from ..lidar.sources import build_lidar, lidar_config
 
-    config = detection_config(args.detect_set)
+    from controller.perception.detection import with_settings
+
+    config = with_settings(args.detect_set)
     scenario = _scenario(args.scenario)
     layout = lidar_config(args.lidar or [], args.lidar_config, scenario)
     if layout is None:

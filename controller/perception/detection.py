@@ -105,6 +105,38 @@ def detect_segments(points, pose, config: DetectionConfig = DEFAULT) -> np.ndarr
     return out[np.argsort(-out[:, 3], kind="stable")]
 
 
+def with_settings(settings, base: DetectionConfig = DEFAULT) -> DetectionConfig:
+    """`base` with NAME=VALUE settings (`--detect-set`); an InputError names a bad one."""
+    import dataclasses
+
+
+    fields = {f.name: f for f in dataclasses.fields(base)}
+    changes = {}
+    for text in settings:
+        name, sep, value = text.partition("=")
+        name = name.strip()
+        if not sep or name not in fields:
+            raise InputError(f"--detect-set {text!r}: expected NAME=VALUE with NAME one of "
+                             f"{', '.join(sorted(fields))}")
+        old = getattr(base, name)
+        try:
+            if isinstance(old, tuple):
+                new = tuple(float(v) for v in value.split(","))
+                if len(new) != len(old):
+                    raise ValueError
+            else:
+                new = type(old)(float(value)) if not isinstance(old, bool) else value == "true"
+        except ValueError:
+            raise InputError(f"--detect-set {text!r}: {name} takes "
+                             f"{'numbers a,b' if isinstance(old, tuple) else 'a number'} "
+                             f"(now {old!r})") from None
+        changes[name] = new
+    try:
+        return dataclasses.replace(base, **changes)
+    except (ValueError, InputError) as exc:
+        raise InputError(f"--detect-set: {exc}") from None
+
+
 ASTERN_MPS = -0.1
 """Below this surge speed (m/s) the boat goes astern (`for_surge`)."""
 

@@ -33,23 +33,33 @@ def register(sub) -> None:
 def run(args) -> int:
     import numpy as np
 
-    from controller.perception.detection import DEFAULT, crop_mask, detect_segments
+    from controller.errors import InputError
+    from controller.perception.detection import crop_mask, detect_segments, with_settings
 
     from ..results.detection_score import score_scan
     from ..scenario_file import load_world
     from ..sensors.lidar import LidarSimulator
 
-    world = load_world(args.scenario)
+    config = with_settings(getattr(args, "detect_set", None) or [])  # (the bridge adds
+    world = load_world(args.scenario)  # --detect-set and --csv to this command)
     pose = world.pose_at(args.at, args.offset)
     sim = LidarSimulator(world, seed=args.seed)
     scan = sim.scan_labelled(pose, args.speed)
-    segments = detect_segments(scan.points, pose, DEFAULT)
-    keep = crop_mask(scan.points, DEFAULT)
-    score = score_scan(world, sim, pose, segments, DEFAULT)
+    segments = detect_segments(scan.points, pose, config)
+    keep = crop_mask(scan.points, config)
+    score = score_scan(world, sim, pose, segments, config)
     coverage = score.covered_m / score.visible_m if score.visible_m else float("nan")
-    draw(args.out, world, sim, pose, scan, keep, segments, DEFAULT,
+    draw(args.out, world, sim, pose, scan, keep, segments, config,
          title=f"{world.name} canal, s = {args.at:g} m, seed {args.seed}: {len(segments)} "
          f"segments, {100 * coverage:.1f} % of the visible wall within 50 m covered")
+    csv = getattr(args, "csv", None)
+    if csv:
+        body = detect_segments(scan.points, (0.0, 0.0, 0.0), config)  # the boat's frame
+        try:
+            np.savetxt(csv, body.reshape(-1, 4), delimiter=",", comments="", fmt="%.4f",
+                       header="x_c_m,y_c_m,theta_rad,length_m")
+        except OSError as exc:
+            raise InputError(f"--csv {csv}: cannot write it: {exc.strerror or exc}") from None
     print(f"wrote {args.out}: {len(scan.points)} points, {int(np.count_nonzero(keep))} after "
           f"the crop, {len(segments)} segments, {100 * coverage:.1f} % of {score.visible_m:.0f} m "
           f"visible wall within 50 m covered, {score.false_m:.1f} m of "

@@ -691,3 +691,19 @@ def test_compiled_profile_at_a_vertex_and_under_a_deck_matches_the_twin():
     for pose in [(41.0, 0.0, 0.0), (38.6, 2.0, 0.3), (41.3, -0.7, 2.9), (15.0, 3.0, -0.2)]:
         a, b = first_hits(sim_c, np.array(pose)), first_hits(sim_n, np.array(pose))
         assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+
+
+def test_detect_on_a_simulated_scan_takes_detect_set_and_csv(tmp_path, capsys):
+    """Issue 35: on a simulated scan, --detect-set and --csv were silently ignored. A typo or
+    a bad value is an error naming it; --csv writes the segments in the boat's frame."""
+    png, csv = tmp_path / "d.png", tmp_path / "d.csv"
+    assert main(["detect", "--at", "30", "--detect-set", "hough_vots=8", "-o", str(png)]) == 2
+    assert "--detect-set 'hough_vots=8'" in capsys.readouterr().err
+    assert main(["detect", "--at", "30", "--detect-set", "hough_votes=abc", "-o", str(png)]) == 2
+    assert "hough_votes takes a number" in capsys.readouterr().err
+    assert main(["detect", "--at", "30", "--detect-set", "hough_votes=8", "--csv", str(csv),
+                 "-o", str(png)]) == 0
+    rows = csv.read_text().splitlines()
+    assert rows[0] == "x_c_m,y_c_m,theta_rad,length_m" and len(rows) > 2
+    ys = [abs(float(r.split(",")[1])) for r in rows[1:]]
+    assert max(ys) < 60.0  # the boat's frame, near it: not the canal's coordinates
