@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import pkgutil
+import re
 import sys
 
 from controller.errors import CanalnavError
@@ -43,9 +44,24 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+_NUMBERS = re.compile(r"^-\d*\.?\d+(,-?\d*\.?\d+)+$")
+
+
+def _join_negative_values(argv: list[str]) -> list[str]:
+    """`--origin -35.3,149.1` as `--origin=-35.3,149.1`: argparse takes a value that starts
+    with '-' and holds a comma for an option, and says only "expected one argument"."""
+    out = []
+    for token in argv:
+        if out and out[-1].startswith("--") and "=" not in out[-1] and _NUMBERS.match(token):
+            out[-1] = f"{out[-1]}={token}"
+        else:
+            out.append(token)
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(_join_negative_values(sys.argv[1:] if argv is None else argv))
     try:
         return int(args.func(args) or 0)
     except CanalnavError as exc:

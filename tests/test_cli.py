@@ -77,3 +77,21 @@ def test_an_out_folder_under_a_file_and_a_figure_in_no_folder_are_named(tmp_path
     missing = tmp_path / "nowhere" / "d.png"
     assert main(["detect", "--at", "10", "-o", str(missing)]) == 2
     assert f"-o {missing}: cannot write the figure" in capsys.readouterr().err
+
+
+def test_a_negative_coordinate_list_after_an_option_is_its_value():
+    """Issue 35: `--origin -35.3,149.1` was argparse's "expected one argument"."""
+    from bridge.main import _join_negative_values
+
+    args = build_parser().parse_args(_join_negative_values(
+        ["bridge", "--connect", "udp:127.0.0.1:14550", "--scenario", "s.toml", "--origin",
+         "-35.3,149.1"]))
+    assert args.origin == "-35.3,149.1"
+    assert _join_negative_values(["run", "a.toml", "--seed", "3"]) == ["run", "a.toml", "--seed", "3"]
+
+
+def test_a_malformed_scheduler_address_is_named_as_such(capsys):
+    """Issue 35: `--scheduler tcp://127.0.0.1` (no port) was reported as unreachable."""
+    for bad in ("tcp://127.0.0.1", "udp://h:8786", "h:port"):
+        assert main(["bench", "soak", "--seeds", "1", "--scheduler", bad]) == 2
+        assert f"--scheduler {bad}: malformed" in capsys.readouterr().err

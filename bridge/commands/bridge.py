@@ -35,8 +35,8 @@ def register(sub) -> None:
                    "role, silence and loss times (see bridge/lidar/lidar_paper_layout.toml); "
                    "default: the scenario's [lidar] table, if any")
     p.add_argument("--origin", metavar="LAT,LON[,ALT]",
-                   help="where the scenario's (0, 0) is on the Earth (degrees, metres; write "
-                   "--origin=-35.36,149.17 when the latitude is negative); default: the "
+                   help="where the scenario's (0, 0) is on the Earth (degrees, metres; a "
+                   "negative latitude as it is, -35.36,149.17); default: the "
                    "scenario's [origin]. One of the two is required: ArduPilot's local frame "
                    "starts wherever its first GPS fix came")
     p.add_argument("--arm", action="store_true", help="arm the autopilot (never without this)")

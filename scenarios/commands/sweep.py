@@ -36,6 +36,24 @@ def check_engine_options(args) -> None:
                          "own workers run the study")
     if not args.connect_timeout > 0:
         raise InputError(f"--connect-timeout must be > 0 seconds, got {args.connect_timeout}")
+    if args.scheduler:
+        check_scheduler_address(args.scheduler)
+
+
+def check_scheduler_address(address: str) -> None:
+    """A Dask scheduler's address as `[tcp://|tls://]HOST:PORT`: anything else is malformed
+    (said so, rather than reported as unreachable after the connect timeout)."""
+    from controller.errors import InputError
+
+    proto, sep, rest = address.partition("://")
+    if not sep:
+        proto, rest = "tcp", address
+    host, colon, port = rest.rpartition(":")
+    ok = proto in ("tcp", "tls") and colon and host and port.isdigit() and 0 < int(port) < 65536
+    if not ok:
+        raise InputError(f"--scheduler {address}: malformed; give tcp://HOST:PORT (a Dask "
+                         f"scheduler listens on port 8786 by default, e.g. "
+                         f"tcp://10.0.0.5:8786)")
 
 
 def register(sub) -> None:
