@@ -19,6 +19,9 @@ the same thread.
 
 from __future__ import annotations
 
+import contextlib
+import io
+
 import math
 import os
 import re
@@ -199,13 +202,18 @@ class AutopilotLink:
 
     def _open(self, url: str):
         device, baud = parse_url(url)
+        chatter = io.StringIO()  # pymavlink prints each refused try ("... sleeping")
         try:
-            conn = mavutil.mavlink_connection(
-                device, baud=baud, source_system=self.system_id,
-                source_component=self.component_id, dialect="ardupilotmega", autoreconnect=True)
+            with contextlib.redirect_stdout(chatter):
+                conn = mavutil.mavlink_connection(
+                    device, baud=baud, source_system=self.system_id,
+                    source_component=self.component_id, dialect="ardupilotmega",
+                    autoreconnect=True)
         except Exception as exc:  # pymavlink raises anything from ValueError to SerialException
-            raise InputError(f"cannot open the MAVLink connection {url!r}: {exc} (examples: "
-                             "udpin:0.0.0.0:14550, udpout:192.168.1.10:14550, "
+            tries = chatter.getvalue().count("sleeping")
+            after = f" after {tries + 1} tries" if tries else ""
+            raise InputError(f"cannot open the MAVLink connection {url!r}{after}: {exc} "
+                             "(examples: udpin:0.0.0.0:14550, udpout:192.168.1.10:14550, "
                              "tcp:127.0.0.1:5760, /dev/ttyACM0,115200)") from None
         if not hasattr(conn, "mav") or not hasattr(conn, "write"):
             raise InputError(f"--connect {url!r} opens a log file, not a live link")

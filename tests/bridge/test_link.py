@@ -389,3 +389,15 @@ def test_bad_urls_and_options_are_input_errors(vclock):
         AutopilotLink("udpout:127.0.0.1:9", vclock, system_id=0)
     assert parse_url("/dev/ttyUSB0,57600") == ("/dev/ttyUSB0", 57600)
     assert parse_url("udpin:0.0.0.0:14550") == ("udpin:0.0.0.0:14550", 115200)
+
+
+def test_a_refused_tcp_link_is_one_clear_error_without_pymavlinks_chatter(capsys, vclock):
+    """Issue 35: pymavlink printed "Connection refused sleeping" for each try before the
+    error; now the error alone says how many tries were made."""
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()  # nobody listens there now
+    with pytest.raises(InputError, match=r"cannot open the MAVLink connection .* after \d+ tries"):
+        AutopilotLink(f"tcp:127.0.0.1:{port}", vclock)
+    assert "sleeping" not in capsys.readouterr().out
