@@ -148,7 +148,9 @@ def _read_messages(path: Path):
         servo = {k: _ServoConversion(k, path) for k in ("RCOU", "RCIN")}
         commands = {"RCOU": [], "RCIN": []}  # (t, nT, nS)
         errors = {}
+        last_us = 0
         while (m := reader.recv_match(type=list(MESSAGES))) is not None:
+            last_us = max(last_us, int(getattr(m, "TimeUS", 0) or 0))
             kind = m.get_type()
             if kind == "PARM":
                 name, value = str(m.Name), float(m.Value)
@@ -169,6 +171,11 @@ def _read_messages(path: Path):
             else:
                 s = series[kind]
                 s.rows.append(tuple(getattr(m, c, math.nan) for c in s.columns))
+        left = int(reader.data_len - reader.offset)  # bytes no record could be read from
+        if left >= 3:
+            errors["truncated"] = (f"the log ends in the middle of a record ({left} bytes at "
+                                   f"the end are no whole record): it was cut short, read up "
+                                   f"to t = {last_us * 1e-6:.1f} s")
     finally:
         reader.close()
     return columns, series, params, commands, errors
@@ -356,7 +363,7 @@ def read_dataflash(path: str | Path, sample_s: float = 0.1,
     if not (math.isfinite(sample_s) and sample_s > 0):
         raise InputError(f"sample interval must be positive, got {sample_s!r}")
     columns, series, params, commands, errors = _read_messages(path)
-    notes: list[str] = []
+    notes: list[str] = [errors.pop("truncated")] if "truncated" in errors else []
     try:
         t_pos, north, east, pos_src = _position(columns, series, notes)
         order = np.argsort(t_pos, kind="stable")

@@ -212,3 +212,14 @@ def test_sysid_reads_a_bin_log_from_the_command_line(tmp_path, trajectory, capsy
     assert "no sway-yaw run among the logs" in out
     assert main(["sysid", str(path), "--window", "5:2"]) == 2
     assert "need T0 < T1" in capsys.readouterr().err
+
+
+def test_a_truncated_log_says_so(tmp_path, trajectory):
+    """Issue 35: a .BIN cut short (mid-record) was read with no word of it."""
+    whole = write_log(tmp_path / "whole.BIN", trajectory)
+    data = whole.read_bytes()
+    cut = tmp_path / "cut.BIN"
+    cut.write_bytes(data[: 2 * len(data) // 3 + 7])
+    assert not any("cut short" in n for n in read_dataflash(whole).notes)
+    notes = read_dataflash(cut).notes
+    assert any("ends in the middle of a record" in n and "cut short" in n for n in notes)
