@@ -67,6 +67,16 @@ def run(args) -> int:
                          "from its first")
     segments = detect_segments(cloud, pose[:3], config)
     keep = crop_mask(cloud, config)
+    if not keep.any():  # say why nothing could be detected, instead of 0 segments alone
+        import sys
+
+        z = np.asarray(cloud, float)[:, 2]
+        print(f"canalnav detect: warning: the crop kept none of the {len(cloud)} points (their "
+              f"height below the boat: {np.percentile(-z, 5):.1f} to {np.percentile(-z, 95):.1f} m "
+              f"for 90 % of them; the band is {config.min_height_m:g}-{config.max_height_m:g} m "
+              "above the water). Check the mount: a sensor in ROS's convention (x forward, "
+              "y left, z up) needs roll_deg = 180 on the boat's (x forward, y starboard, z "
+              "down)", file=sys.stderr)
 
     class Scan:
         points = cloud

@@ -63,6 +63,13 @@ def test_detect_on_a_velodyne_pcap_at_a_time(tmp_path, capsys):
         assert main(base + argv) == 2
         err = capsys.readouterr().err
         assert words in err and "Traceback" not in err
+    # the same drive on a wrong mount (30 m below the water): every point is cropped away,
+    # and the command says so and what to check (issue 35)
+    wrong = tmp_path / "wrong.toml"
+    wrong.write_text(layout.read_text().replace("z_m = -1.3", "z_m = 30.0"))
+    assert main(["detect", "--lidar-config", str(wrong), "--at", "0.15", "-o", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "the crop kept none of the" in err and "roll_deg = 180" in err
 
 
 def test_detect_without_lidar_is_still_the_simulated_scan(tmp_path, capsys):
