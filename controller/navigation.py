@@ -29,9 +29,12 @@ from filterpy.kalman import ExtendedKalmanFilter
 
 from .errors import InputError
 from .geometry import wrap_angle
-from .kernels import load_kernel, pointer
+from .kernels import Kernel, pointer
 
-_KERNEL = Path(__file__).with_name("kernels") / "nav_filter.c"
+_KERNEL = Kernel(Path(__file__).with_name("kernels") / "nav_filter.c", {
+    "nav_predict": (None, [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_double, ctypes.c_int,
+                           ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_double]),
+    "nav_update": (None, [ctypes.c_void_p] * 2 + [ctypes.c_int] + [ctypes.c_void_p] * 2)})
 
 
 @dataclass(frozen=True)
@@ -133,7 +136,7 @@ class NavigationFilter:
         self._R_vel = np.eye(2) * cfg.gps_vel_sigma_mps**2
         self._R_att = np.diag([cfg.heading_sigma_rad**2, cfg.yaw_rate_sigma_radps**2])
         self._q_a, self._q_r = cfg.accel_noise_mps2**2, cfg.yaw_accel_noise_radps2**2
-        lib = load_kernel(_KERNEL) if backend != "filterpy" else None
+        lib = _KERNEL() if backend != "filterpy" else None
         if backend == "c" and lib is None:
             raise RuntimeError("navigation filter: the C kernel could not be built (see the "
                                "warning above)")
@@ -141,12 +144,6 @@ class NavigationFilter:
         if lib is not None:
             self._x, self._P = x0.copy(), P0.copy()
             self._c_predict, self._c_update = lib.nav_predict, lib.nav_update
-            self._c_predict.restype = self._c_update.restype = None
-            self._c_predict.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_double,
-                                        ctypes.c_int, ctypes.c_double, ctypes.c_double,
-                                        ctypes.c_double, ctypes.c_double]
-            self._c_update.argtypes = [ctypes.c_void_p] * 2 + [ctypes.c_int] + [
-                ctypes.c_void_p] * 2
             self._px, self._pP = pointer(self._x), pointer(self._P)
             self._z = np.zeros(2)
             self._pz = pointer(self._z)

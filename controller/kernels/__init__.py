@@ -19,28 +19,40 @@ from pathlib import Path
 FLAGS = ("-O2", "-ffp-contract=off")
 """-ffp-contract=off: no fused multiply-adds, so a kernel rounds as its numpy twin does."""
 
-_loaded: dict[Path, ctypes.CDLL | None] = {}
+class Kernel:
+    """The compiled library of one C file, built, loaded and its functions typed on the
+    first call (then kept for the process; on disk by `codegen_cache`), or None with a
+    warning when that cannot be done: callers then use their numpy twin.
 
+    `signatures`: {function name: (restype, [argtypes])}."""
 
-def load_kernel(source: Path) -> ctypes.CDLL | None:
-    """The compiled library of the C file `source` (cached per process and on disk), or None
-    with a warning when it cannot be built or loaded; callers then use their numpy twin."""
-    source = Path(source)
-    if source in _loaded:
-        return _loaded[source]
-    from controller.nmpc.codegen_cache import load_cached
+    def __init__(self, source: Path, signatures: dict):
+        self.source, self.signatures = Path(source), signatures
+        self._lib: ctypes.CDLL | None = None
+        self._tried = False
 
-    try:
-        lib, _, _, _ = load_cached(source.stem, source.read_text(),
-                                   lambda path: ctypes.CDLL(str(path)), flags=FLAGS)
-    except (OSError, subprocess.CalledProcessError) as exc:
-        detail = getattr(exc, "stderr", "") or str(exc)
-        warnings.warn(f"cannot compile or load the kernel {source.name}, running its numpy "
-                      f"twin instead (slower): {detail.strip()[:300]}", RuntimeWarning,
-                      stacklevel=2)
-        lib = None
-    _loaded[source] = lib
-    return lib
+    def __call__(self) -> ctypes.CDLL | None:
+        if not self._tried:
+            self._tried = True
+            self._lib = self._load()
+        return self._lib
+
+    def _load(self) -> ctypes.CDLL | None:
+        from controller.nmpc.codegen_cache import load_cached
+
+        try:
+            lib, _, _, _ = load_cached(self.source.stem, self.source.read_text(),
+                                       lambda path: ctypes.CDLL(str(path)), flags=FLAGS)
+        except (OSError, subprocess.CalledProcessError) as exc:
+            detail = getattr(exc, "stderr", "") or str(exc)
+            warnings.warn(f"cannot compile or load the kernel {self.source.name}, running its "
+                          f"numpy twin instead (slower): {detail.strip()[:300]}",
+                          RuntimeWarning, stacklevel=3)
+            return None
+        for name, (restype, argtypes) in self.signatures.items():
+            function = getattr(lib, name)
+            function.restype, function.argtypes = restype, list(argtypes)
+        return lib
 
 
 def pointer(array) -> int:

@@ -2,8 +2,8 @@
  * the height band (z down: -max_h <= z <= -min_h), within `range` of the boat in x and y,
  * outside the own hull's box and the wake's box behind it. The cloud is read through its
  * strides (in elements), so row- and column-major clouds need no copy; the thresholds are
- * compared in the cloud's own precision, as numpy compares them. Writes the kept points'
- * indices (ascending) and their x and y; returns how many. */
+ * compared in the cloud's own precision, as numpy compares them. Returns how many points
+ * are kept. */
 #include <stdint.h>
 
 /* Whether a point is kept: in the band, within range, outside the hull's and the wake's
@@ -19,7 +19,7 @@
 #define CROP(NAME, T)                                                                       \
     int64_t NAME(int64_t n, const T *p, int64_t row, int64_t col, double min_h_d,          \
                  double max_h_d, double range_d, double x0_d, double x1_d, double hull_w_d, \
-                 double wake_x0_d, double wake_w_d, int64_t *idx, T *xo, T *yo)            \
+                 double wake_x0_d, double wake_w_d, int64_t *idx, T *xo, T *yo, T *rows)   \
     {                                                                                       \
         THRESHOLDS(T)                                                                       \
         int64_t m = 0;                                                                      \
@@ -28,41 +28,26 @@
             T ay = y < 0 ? -y : y;                                                          \
             if (!KEEP(x, y, z, ay))                                                         \
                 continue;                                                                   \
-            idx[m] = i;                                                                     \
-            xo[m] = x;                                                                      \
-            yo[m] = y;                                                                      \
+            if (idx) {                                                                      \
+                idx[m] = i;                                                                 \
+                xo[m] = x;                                                                  \
+                yo[m] = y;                                                                  \
+            }                                                                               \
+            if (rows) {                                                                     \
+                rows[3 * m] = x;                                                            \
+                rows[3 * m + 1] = y;                                                        \
+                rows[3 * m + 2] = z;                                                        \
+            }                                                                               \
             m++;                                                                            \
         }                                                                                   \
         return m;                                                                           \
     }
 
+/* Writes, of the kept points, the indices (ascending), x and y when `idx` is given, and the
+ * rows x, y, z (m x 3: what `cloud[idx]` gives, without the gather through a column-major
+ * view) when `rows` is; either may be NULL. */
 CROP(crop_f32, float)
 CROP(crop_f64, double)
-
-/* The same crop, the kept points written as rows x, y, z of `out` (m x 3): what
- * `cloud[idx]` gives, without the gather through a column-major view. */
-#define CROP_ROWS(NAME, T)                                                                  \
-    int64_t NAME(int64_t n, const T *p, int64_t row, int64_t col, double min_h_d,          \
-                 double max_h_d, double range_d, double x0_d, double x1_d, double hull_w_d, \
-                 double wake_x0_d, double wake_w_d, T *out)                                 \
-    {                                                                                       \
-        THRESHOLDS(T)                                                                       \
-        int64_t m = 0;                                                                      \
-        for (int64_t i = 0; i < n; i++) {                                                   \
-            T x = p[i * row], y = p[i * row + col], z = p[i * row + 2 * col];               \
-            T ay = y < 0 ? -y : y;                                                          \
-            if (!KEEP(x, y, z, ay))                                                         \
-                continue;                                                                   \
-            out[3 * m] = x;                                                                 \
-            out[3 * m + 1] = y;                                                             \
-            out[3 * m + 2] = z;                                                             \
-            m++;                                                                            \
-        }                                                                                   \
-        return m;                                                                           \
-    }
-
-CROP_ROWS(crop_rows_f32, float)
-CROP_ROWS(crop_rows_f64, double)
 
 /* The tracker's split of its crop (n points x, y, z, strides in elements): the occluders
  * (x, y of every point not in the own hull's box when `hull_box`, in the cloud's precision),

@@ -172,20 +172,11 @@ def crop_xy(points, config: DetectionConfig = DEFAULT):
 def _crop(p: np.ndarray, config: DetectionConfig):
     """Indices of the points `crop_mask` keeps, and their x and y: by the compiled kernel
     `cloud_crop.c` (one pass over the cloud, through its strides), or `_crop_numpy`."""
-    lib = crop_kernel()
-    if lib is None or p.dtype not in (np.float32, np.float64) or p.ndim != 2 \
-            or p.shape[1] != 3 or not len(p):
+    if not _compiled_crop(p):
         return _crop_numpy(p, config)
     n = len(p)
-    size = p.itemsize
-    idx = np.empty(n, np.int64)
-    x, y = np.empty(n, p.dtype), np.empty(n, p.dtype)
-    x0, x1 = config.hull_x_m
-    crop = lib.crop_f32 if p.dtype == np.float32 else lib.crop_f64
-    m = crop(n, p.__array_interface__["data"][0], p.strides[0] // size, p.strides[1] // size,
-             config.min_height_m, config.max_height_m, config.range_m, x0, x1,
-             config.hull_half_width_m, x0 - config.wake_length_m, config.wake_half_width_m,
-             pointer(idx), pointer(x), pointer(y))
+    idx, x, y = np.empty(n, np.int64), np.empty(n, p.dtype), np.empty(n, p.dtype)
+    m = _crop_pass(p, config, pointer(idx), pointer(x), pointer(y), None)
     return idx[:m], x[:m], y[:m]
 
 
@@ -194,19 +185,29 @@ def crop_rows(points, config: DetectionConfig = DEFAULT) -> np.ndarray:
     the cloud's dtype in the cloud's order (`points[crop_xy(points)[0]]`, gathered in one
     compiled pass)."""
     p = np.asarray(points)
-    lib = crop_kernel()
-    if lib is None or p.dtype not in (np.float32, np.float64) or p.ndim != 2 \
-            or p.shape[1] != 3 or not len(p):
+    if not _compiled_crop(p):
         return p[_crop_numpy(p, config)[0]]
     out = np.empty((len(p), 3), p.dtype)
-    x0, x1 = config.hull_x_m
-    crop = lib.crop_rows_f32 if p.dtype == np.float32 else lib.crop_rows_f64
+    return out[:_crop_pass(p, config, None, None, None, pointer(out))]
+
+
+def _compiled_crop(p: np.ndarray) -> bool:
+    """The compiled crop takes this cloud: a non-empty (N, 3) float cloud, and a kernel."""
+    return (p.dtype in (np.float32, np.float64) and p.ndim == 2 and p.shape[1] == 3
+            and len(p) > 0 and crop_kernel() is not None)
+
+
+def _crop_pass(p: np.ndarray, config: DetectionConfig, idx, x, y, rows) -> int:
+    """One pass of `cloud_crop.c` over `p` (outputs by address, None: not wanted): how many
+    points the crop keeps."""
+    lib = crop_kernel()
+    crop = lib.crop_f32 if p.dtype == np.float32 else lib.crop_f64
     size = p.itemsize
-    m = crop(len(p), p.__array_interface__["data"][0], p.strides[0] // size,
-             p.strides[1] // size, config.min_height_m, config.max_height_m, config.range_m,
-             x0, x1, config.hull_half_width_m, x0 - config.wake_length_m,
-             config.wake_half_width_m, pointer(out))
-    return out[:m]
+    x0, x1 = config.hull_x_m
+    return crop(len(p), p.__array_interface__["data"][0], p.strides[0] // size,
+                p.strides[1] // size, config.min_height_m, config.max_height_m,
+                config.range_m, x0, x1, config.hull_half_width_m, x0 - config.wake_length_m,
+                config.wake_half_width_m, idx, x, y, rows)
 
 
 def _crop_numpy(p: np.ndarray, config: DetectionConfig):

@@ -49,7 +49,7 @@ from pathlib import Path
 import numpy as np
 
 from controller.errors import InputError
-from controller.kernels import load_kernel, pointer
+from controller.kernels import Kernel, pointer
 
 from ..world.canal import CanalWorld, Obstacle, obstacle_edges
 
@@ -352,34 +352,16 @@ _FACE_LABEL = np.array([FACE, BACKDROP, OBSTACLE, OBSTACLE, WATER], np.int8)
 _TOP_LABEL = np.array([GROUND, BACKDROP, OBSTACLE, OBSTACLE, WATER], np.int8)
 _NEG_INF_KEY = int(_ordered(np.float32([-np.inf]))[0])
 _SOLID_BITS = 24  # a profile key: float32 height as ordered int << 24 | (solid + 1)
-_PROFILE_C = Path(__file__).with_name("lidar_profile.c")
-
-
-_KERNEL: list = []  # the loaded kernel (or None), once per process
-
-
-def _profile_kernel():
-    """The compiled kernels of this renderer, argument types set (None: use numpy)."""
-    if _KERNEL:
-        return _KERNEL[0]
-    lib = load_kernel(_PROFILE_C)
-    _KERNEL.append(lib)
-    if lib is not None and not getattr(lib, "typed", False):
-        i64, ptr, f64 = ctypes.c_int64, ctypes.c_void_p, ctypes.c_double
-        lib.lidar_profile.argtypes = [i64] + [ptr] * 13 + [ctypes.c_int8] + [ptr] * 2
-        lib.lidar_cast.restype = i64
-        lib.lidar_cast.argtypes = [i64] + [ptr] * 13 + [f64] * 3 + [ptr] * 4
-        lib.lidar_in_range.restype = i64
-        lib.lidar_in_range.argtypes = [i64] + [ptr] * 4
-        lib.lidar_keep.restype = i64
-        lib.lidar_keep.argtypes = [i64, ptr, ptr, ptr, ctypes.c_int, ctypes.c_int,
-                                   ctypes.c_int8, ptr, ptr]
-        lib.lidar_points.restype = None
-        lib.lidar_points.argtypes = [i64, ptr, ptr, ptr, ptr, ctypes.c_float, ptr, ptr, i64,
-                                     i64, ptr, ptr, ptr, ctypes.c_int8, ptr, i64]
-        lib.lidar_profile.restype = ctypes.c_int
-        lib.typed = True
-    return lib
+_i64, _ptr, _f64 = ctypes.c_int64, ctypes.c_void_p, ctypes.c_double
+_profile_kernel = Kernel(Path(__file__).with_name("lidar_profile.c"), {
+    "lidar_profile": (ctypes.c_int, [_i64] + [_ptr] * 13 + [ctypes.c_int8] + [_ptr] * 2),
+    "lidar_cast": (_i64, [_i64] + [_ptr] * 13 + [_f64] * 3 + [_ptr] * 4),
+    "lidar_in_range": (_i64, [_i64] + [_ptr] * 4),
+    "lidar_keep": (_i64, [_i64, _ptr, _ptr, _ptr, ctypes.c_int, ctypes.c_int, ctypes.c_int8,
+                          _ptr, _ptr]),
+    "lidar_points": (None, [_i64, _ptr, _ptr, _ptr, _ptr, ctypes.c_float, _ptr, _ptr, _i64,
+                            _i64, _ptr, _ptr, _ptr, ctypes.c_int8, _ptr, _i64])})
+"""The renderer's compiled passes (call it: the library, or None to render with numpy)."""
 
 
 @dataclass(frozen=True, eq=False)
