@@ -218,7 +218,6 @@ class HpipmOcpQp:
         self.lib.nmpc_qp_bind(self._handle, *map(_ptr, arrays),
                               self.info.ctypes.data_as(_c_int_p), _ptr(self.res))
         self._set, self._solve = self.lib.nmpc_qp_set, self.lib.nmpc_qp_solve
-        self.soft = soft_l1 > 0
         # the soft rows' slacks of the last solve, (N+1) x ng (stage 0: 0), read in place
         address = self.lib.nmpc_qp_slack(self._handle)
         self.slack = (np.ctypeslib.as_array((ctypes.c_double * ((N + 1) * ng)).from_address(

@@ -142,7 +142,7 @@ class QpStep:
         self.elastic_qp = None
         if c.obstacle_rows == "exact-penalty":
             self.elastic_qp = HpipmOcpQp(*args, soft_l1=c.obstacle_l1, soft_l2=c.obstacle_l2)
-            self.elastic_qp.share_arrays(self.qp)
+            # (`_bind_hpipm` makes it read the hard QP's arrays)
         self.elastic_used = False
         self._bind_hpipm()
         self._solve = self._solve_hpipm
