@@ -51,6 +51,12 @@ def register_bench(sub) -> None:
     p.add_argument("--qp-compare-steps", type=int, default=200,
                    help="steps of extra RTI runs with each QP solver (hpipm direct, hpipm "
                    "through CasADi, piqp); 0 skips them (200)")
+    p.add_argument("--peer", choices=("acados",), default=None,
+                   help="also run the same OCP with acados (SQP_RTI, HPIPM) in the same closed "
+                   "loop, handed canalnav's per-step inputs ready-made, and report the two side "
+                   "by side (needs comma-deps-acados installed beside the project, see README)")
+    p.add_argument("--peer-repeats", type=int, default=3,
+                   help="runs of canalnav and of the peer, alternating (3); medians reported")
     p.set_defaults(func=run)
 
 
@@ -145,6 +151,81 @@ def _vessel_cases(config, qp, canal, x0, act0, args) -> dict:
     out["goal"] = {name: {"mean_ms<=1": out[name]["mean_ms"] <= 1.0,
                           "p99_ms<=2": out[name]["p99_ms"] <= 2.0}
                    for name in ("vessel_slots_meeting", "vessel_slots_two_vessels")}
+    return out
+
+
+def _acados_peer(config, qp, canal, x0, act0, args) -> dict:
+    """canalnav's RTI (split, as the controller runs) against acados on the same OCP, runs
+    alternating: the whole step's CPU time (canalnav: everything from the inputs to the
+    command and its preparation; acados: its driver handed canalnav's inputs), the feedback
+    latency (state in, command out), QP iterations and how far the trajectories part."""
+    import numpy as np
+
+    from controller.nmpc.acados_peer import run_peer
+    from controller.nmpc.bench import closed_loop
+    from controller.nmpc.controller import NmpcController
+
+    if args.peer_repeats < 1:
+        from controller.errors import InputError
+
+        raise InputError(f"--peer-repeats: need at least 1, got {args.peer_repeats}")
+    ours, theirs = [], []
+    for k in range(args.peer_repeats):
+        print(f"bench nmpc: RTI and acados, run {k + 1} of {args.peer_repeats} ...",
+              file=sys.stderr, flush=True)
+        record: list = []
+        controller = NmpcController(config, method="rti", qp=qp)
+        run_ = closed_loop(controller, canal, x0, act0, args.steps, args.speed, record=record)
+        peer = run_peer(config, qp, record, x0, act0, args.speed)
+        ours.append((run_, record))
+        theirs.append(peer)
+    run_, record = ours[0]
+    peer = theirs[0]
+    n = min(len(run_.states), len(peer["states"]))
+    d = np.hypot(*(run_.states[:n, :2] - peer["states"][:n, :2]).T)
+
+    def med(values):
+        return round(float(np.median(values)), 3)
+
+    st = [s.stats for s in run_.steps]
+    canalnav = {
+        "step_cpu_ms": {"mean": med([1e3 * np.mean([r[0] for r in rec]) for _, rec in ours]),
+                        "p99": med([1e3 * np.percentile([r[0] for r in rec], 99)
+                                    for _, rec in ours])},
+        "feedback_latency_ms": {
+            "mean": med([1e3 * np.mean([s.stats.time_feedback_s for s in r.steps])
+                         for r, _ in ours]),
+            "p99": med([1e3 * np.percentile([s.stats.time_feedback_s for s in r.steps], 99)
+                        for r, _ in ours])},
+        "feedback_cpu_ms": med([1e3 * np.mean([s.stats.cpu_time_s for s in r.steps])
+                                for r, _ in ours]),
+        "qp_iterations_mean": round(float(np.mean([s.qp_iterations for s in st])), 2),
+        "failed_steps": int(sum(not s.ok for s in st)),
+        "elastic_steps": int(sum(s.elastic_segments > 0 or s.elastic_vessels > 0 for s in st)),
+        "set_up_in_feedback_steps": int(sum(not s.set_up_in_preparation for s in st)),
+    }
+    acados = {
+        "step_cpu_ms": {"mean": med([1e3 * p["cpu_s"].mean() for p in theirs]),
+                        "p99": med([1e3 * np.percentile(p["cpu_s"], 99) for p in theirs])},
+        "feedback_latency_ms": {"mean": med([1e3 * p["feedback_s"].mean() for p in theirs]),
+                                "p99": med([1e3 * np.percentile(p["feedback_s"], 99)
+                                            for p in theirs])},
+        "feedback_cpu_ms": med([1e3 * p["feedback_cpu_s"].mean() for p in theirs]),
+        "qp_iterations_mean": round(float(peer["qp_iterations"].mean()), 2),
+        "failed_steps": int(np.count_nonzero(peer["status"])),
+    }
+    out = {"canalnav": canalnav, "acados": acados, "repeats": args.peer_repeats,
+           "max_position_diff_m": float(f"{d.max():.3g}"),
+           "final_position_diff_m": float(f"{d[-1]:.3g}"),
+           "canalnav_over_acados": {
+               "step_cpu": round(canalnav["step_cpu_ms"]["mean"] / acados["step_cpu_ms"]["mean"], 3),
+               "feedback_latency": round(canalnav["feedback_latency_ms"]["mean"]
+                                         / acados["feedback_latency_ms"]["mean"], 3)},
+           "inputs": "acados gets canalnav's per-step parameters, reference and first warm "
+                     "start ready-made (not timed on its side); its own state and plan"}
+    out["goal"] = {"step_cpu<=acados": out["canalnav_over_acados"]["step_cpu"] <= 1.0,
+                   "feedback<=acados": out["canalnav_over_acados"]["feedback_latency"] <= 1.0,
+                   "trajectory<=0.01m": out["max_position_diff_m"] <= 0.01}
     return out
 
 
@@ -254,6 +335,9 @@ def run(args) -> int:
             and result.get("rti_vs_sqp_max_position_diff_m", 1e9) <= 0.2,
             "every_run_complete": complete,
         }
+
+    if args.peer == "acados":
+        result["peer_acados"] = _acados_peer(config, qp, canal, x0, act0, args)
 
     if args.vessel_steps > 0:
         result["vessels"] = _vessel_cases(config, qp, canal, x0, act0, args)

@@ -5,6 +5,7 @@ and the smooth model as the plant. Scenario runs with LiDAR and the FMU live in 
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -125,10 +126,12 @@ class BenchVessel:
 
 def closed_loop(controller: NmpcController, canal: Canal, x0, actuators0, steps: int,
                 speed_mps: float = 2.0, current=(0.0, 0.0), plant_substeps: int = 2,
-                vessels=()) -> Run:
+                vessels=(), record: list | None = None) -> Run:
     """Run the controller every control period on the smooth model (actuator rate limits
     on), with other `vessels` (BenchVessel) if given. Stops early, with `failure` set, if the
-    controller raises SolverError."""
+    controller raises SolverError. `record`: a list that gets, per step, the CPU seconds of
+    the whole controller step and what its OCP was given (x_init, parameters, reference,
+    warm start), for a peer solver to be handed the same (`acados_peer`)."""
     cfg = controller.config
     plant = plant_step_function(SMOOTH)
     p = cfg.boat.as_vector()
@@ -142,12 +145,18 @@ def closed_loop(controller: NmpcController, canal: Canal, x0, actuators0, steps:
     for k in range(steps):
         segs = visible_segments(all_segments, x, cfg.segment_range_m)
         tracks = [v.at(k * cfg.control_period_s) for v in vessels]
+        cpu0 = time.thread_time()
         try:
             step = controller.step(x, act, segs, canal.waypoints, speed_mps, current,
                                    vessels=tracks)
         except SolverError as exc:
             failure = str(exc)
             break
+        if record is not None:
+            cpu = time.thread_time() - cpu0
+            params, w_ref, guess = controller.last_qp_inputs
+            record.append((cpu, np.concatenate([x, act]), params.copy(), w_ref.copy(),
+                           None if guess is None else guess.copy()))
         out.append(step)
         for _ in range(plant_substeps):
             x_next, act_next, _ = plant(x, act, step.command, p, current, rate_max, h)

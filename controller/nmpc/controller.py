@@ -268,6 +268,7 @@ class NmpcController:
         """Forget the plan, the progress along the path and the failure count."""
         self._plan: np.ndarray | None = None
         self._solved = False  # a plan came from a successful solve since the reset
+        self.last_qp_inputs: tuple | None = None
         self._progress_m = 0.0
         self._path: WaypointPath | None = None
         self._waypoints_given: np.ndarray | None = None
@@ -435,6 +436,8 @@ class NmpcController:
         self._inputs = inputs
         p, w_ref, lbw, ubw, reference = setup.p, setup.w_ref, setup.lbw, setup.ubw, setup.reference
         self._last_p = p
+        self.last_qp_inputs = (p, w_ref, guess)  # what this step's OCP was given (its
+        # parameters, reference and warm start; buffers reused by later steps): for peers
         if not result.ok and not from_safe_guess:
             retry = self._solve(self._safe_guess(x_init, reference, setup.slack_ref), p, w_ref,
                                 lbw, ubw)
