@@ -175,7 +175,8 @@ def _acados_peer(config, qp, canal, x0, act0, args) -> dict:
               file=sys.stderr, flush=True)
         record: list = []
         controller = NmpcController(config, method="rti", qp=qp)
-        run_ = closed_loop(controller, canal, x0, act0, args.steps, args.speed, record=record)
+        run_ = closed_loop(controller, canal, x0, act0, args.steps, args.speed, record=record,
+                           scan_ahead=True)
         peer = run_peer(config, qp, record, x0, act0, args.speed)
         ours.append((run_, record))
         theirs.append(peer)
@@ -221,8 +222,10 @@ def _acados_peer(config, qp, canal, x0, act0, args) -> dict:
                "step_cpu": round(canalnav["step_cpu_ms"]["mean"] / acados["step_cpu_ms"]["mean"], 3),
                "feedback_latency": round(canalnav["feedback_latency_ms"]["mean"]
                                          / acados["feedback_latency_ms"]["mean"], 3)},
-           "inputs": "acados gets canalnav's per-step parameters, reference and first warm "
-                     "start ready-made (not timed on its side); its own state and plan"}
+           "inputs": "the walls seen at a step reach canalnav's preparation after its command "
+                     "and are the next step's (scan_ahead: a scan is processed while the boat "
+                     "moves); acados gets canalnav's per-step parameters, reference and first "
+                     "warm start ready-made (not timed on its side), its own state and plan"}
     out["goal"] = {"step_cpu<=acados": out["canalnav_over_acados"]["step_cpu"] <= 1.0,
                    "feedback<=acados": out["canalnav_over_acados"]["feedback_latency"] <= 1.0,
                    "trajectory<=0.01m": out["max_position_diff_m"] <= 0.01}

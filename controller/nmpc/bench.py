@@ -126,12 +126,17 @@ class BenchVessel:
 
 def closed_loop(controller: NmpcController, canal: Canal, x0, actuators0, steps: int,
                 speed_mps: float = 2.0, current=(0.0, 0.0), plant_substeps: int = 2,
-                vessels=(), record: list | None = None) -> Run:
+                vessels=(), record: list | None = None, scan_ahead: bool = False) -> Run:
     """Run the controller every control period on the smooth model (actuator rate limits
     on), with other `vessels` (BenchVessel) if given. Stops early, with `failure` set, if the
     controller raises SolverError. `record`: a list that gets, per step, the CPU seconds of
     the whole controller step and what its OCP was given (x_init, parameters, reference,
-    warm start), for a peer solver to be handed the same (`acados_peer`)."""
+    warm start), for a peer solver to be handed the same (`acados_peer`). `scan_ahead`: the
+    perception of a real loop, where a scan is processed while the boat moves: the segments
+    and tracks seen at one step are handed to the controller's preparation right after its
+    command (`prepare(segments=..., vessels=...)`) and are the next step's, so the feedback
+    only embeds the new state; without it they come with the state (and the feedback sets
+    the step up whenever they changed)."""
     cfg = controller.config
     plant = plant_step_function(SMOOTH)
     p = cfg.boat.as_vector()
@@ -142,13 +147,21 @@ def closed_loop(controller: NmpcController, canal: Canal, x0, actuators0, steps:
     act = np.asarray(actuators0, float).copy()
     states, acts, out = [x.copy()], [act.copy()], []
     failure = ""
+    seen = None  # with scan_ahead: the last step's segments and tracks
     for k in range(steps):
-        segs = visible_segments(all_segments, x, cfg.segment_range_m)
-        tracks = [v.at(k * cfg.control_period_s) for v in vessels]
+        scan = (visible_segments(all_segments, x, cfg.segment_range_m),
+                [v.at(k * cfg.control_period_s) for v in vessels])
+        segs, tracks = seen if scan_ahead and seen is not None else scan
         cpu0 = time.thread_time()
         try:
-            step = controller.step(x, act, segs, canal.waypoints, speed_mps, current,
-                                   vessels=tracks)
+            if scan_ahead:
+                step = controller.feedback(x, act, segs, canal.waypoints, speed_mps, current,
+                                           vessels=tracks)
+                seen = scan
+                controller.prepare(segments=scan[0], vessels=scan[1])
+            else:
+                step = controller.step(x, act, segs, canal.waypoints, speed_mps, current,
+                                       vessels=tracks)
         except SolverError as exc:
             failure = str(exc)
             break
