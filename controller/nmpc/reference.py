@@ -16,6 +16,8 @@ import numpy as np
 
 from ..errors import InputError, finite_number
 from ..geometry import Polyline, unwrap_near
+from ..kernels import pointer
+from .path_geometry import geometry_kernel
 
 
 @dataclass(frozen=True)
@@ -72,7 +74,23 @@ class WaypointPath:
 
     def frame(self, points, s_min: float = 0.0, s_max: float | None = None):
         """Path coordinates of many points (N, 2): arc length s of the closest point with s in
-        [s_min, s_max], and the signed offset from it (> 0 to starboard of the path)."""
+        [s_min, s_max], and the signed offset from it (> 0 to starboard of the path). By the
+        compiled kernel (`path_geometry.c`), or `frame_numpy` where there is none."""
+        lib = geometry_kernel()
+        if lib is None:
+            return self.frame_numpy(points, s_min, s_max)
+        p = np.asarray(points, float).reshape(-1, 2)
+        x, y = np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1])
+        s, d = np.empty(len(p)), np.empty(len(p))
+        cum = self.cumulative
+        lib.path_frame(len(p), pointer(x), pointer(y), len(self.leg_length),
+                       pointer(self.start), pointer(self.delta), pointer(self.leg_length),
+                       pointer(cum), float(s_min), float(cum[-1] if s_max is None else s_max),
+                       pointer(s), pointer(d))
+        return s, d
+
+    def frame_numpy(self, points, s_min: float = 0.0, s_max: float | None = None):
+        """`frame`'s numpy twin."""
         cum, L = self.cumulative, self.leg_length
         s_max = cum[-1] if s_max is None else min(s_max, cum[-1])
         s_min = min(s_min, s_max)

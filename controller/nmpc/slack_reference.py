@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..kernels import pointer
+from .path_geometry import geometry_kernel
 from .reference import WaypointPath
 
 _ABEAM_COS = 0.5  # a segment's nearest point counts as a side wall within 60 deg of the normal
@@ -147,7 +149,25 @@ def forced_slack_at(points: np.ndarray, headings: np.ndarray, segments: np.ndarr
     """The slack (n,) a hull circle needs at the best place across the path through each point:
     midway between the walls abeam, the OCP's super-ellipses (not the distance: near a steep
     segment's ends the power-4 shape reaches up to about 0.6 m further) allow it a separation
-    m'; the slack is m' - margin_m, clipped to [slack_min_m, 0]. 0 where a side is open."""
+    m'; the slack is m' - margin_m, clipped to [slack_min_m, 0]. 0 where a side is open.
+    By the compiled kernel (`path_geometry.c`), or `forced_slack_at_numpy`."""
+    lib = geometry_kernel()
+    if lib is None:
+        return forced_slack_at_numpy(points, headings, segments, margin_m, slack_min_m)
+    p = np.asarray(points, float).reshape(-1, 2)
+    x, y = np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1])
+    h = np.ascontiguousarray(headings, float)
+    seg = np.ascontiguousarray(segments, float).reshape(-1, 4)
+    out = np.empty(len(p))
+    scratch = np.empty(6 * max(len(seg), 1))
+    lib.forced_slack_at(len(p), pointer(x), pointer(y), pointer(h), len(seg), pointer(seg),
+                        float(margin_m), float(slack_min_m), pointer(out), pointer(scratch))
+    return out
+
+
+def forced_slack_at_numpy(points: np.ndarray, headings: np.ndarray, segments: np.ndarray,
+                          margin_m: float, slack_min_m: float) -> np.ndarray:
+    """`forced_slack_at`'s numpy twin."""
     points = np.asarray(points, float).reshape(-1, 2)
     out = np.zeros(len(points))
     if len(segments) == 0:

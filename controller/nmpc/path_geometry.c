@@ -1,0 +1,146 @@
+/* The NMPC's per-step geometry along the path, as numpy computes it (`reference.py`,
+ * `slack_reference.py`), in the same operations and order; only the sines and cosines may
+ * round differently from numpy's (its vectorised ones), by an ulp.
+ *
+ * path_frame: arc length s and signed offset d (> 0 to starboard) of n points against the
+ *   legs of a waypoint path whose extent overlaps [s_min, s_max] (WaypointPath.frame).
+ * forced_slack_at: the slack each point's hull circle needs midway between the walls abeam
+ *   (slack_reference.forced_slack_at), for M segments (x_c, y_c, theta, length) rows. */
+#include <math.h>
+#include <stdint.h>
+
+void path_frame(int64_t n, const double *px, const double *py, int64_t legs,
+                const double *start, const double *delta, const double *length,
+                const double *cum, double s_min, double s_max, double *s_out, double *d_out)
+{
+    if (s_max > cum[legs]) s_max = cum[legs];
+    if (s_min > s_max) s_min = s_max;
+    for (int64_t i = 0; i < n; i++) {
+        double best = INFINITY, best_s = 0.0, best_d = 0.0;
+        int found = 0;
+        for (int64_t k = 0; k < legs; k++) {
+            if (!(cum[k] <= s_max && cum[k + 1] >= s_min)) continue;
+            double dx = delta[2 * k], dy = delta[2 * k + 1], L = length[k], at = cum[k];
+            double qx = px[i] - start[2 * k], qy = py[i] - start[2 * k + 1];
+            double along = (qx * dx + qy * dy) / L;
+            double lo = at > s_min ? at : s_min;
+            double hi = cum[k + 1] < s_max ? cum[k + 1] : s_max;
+            double s = at + along;
+            s = s > lo ? s : lo;  /* np.maximum(at + along, lo), then np.minimum(., hi) */
+            s = s < hi ? s : hi;
+            double t = (s - at) / L;
+            double rx = qx - t * dx, ry = qy - t * dy;
+            double r2 = rx * rx + ry * ry;
+            if (!found || r2 < best) {  /* np.argmin: the first of equal ones */
+                found = 1;
+                best = r2;
+                best_s = s;
+                double side = (dx * ry - dy * rx) / L;
+                double offset = hypot(rx, ry);
+                best_d = side >= 0.0 ? offset : -offset;
+            }
+        }
+        s_out[i] = best_s;
+        d_out[i] = best_d;
+    }
+}
+
+static double pow4(double x)
+{
+    double x2 = x * x;
+    return x2 * x2;
+}
+
+/* The largest separation m' <= margin with which a point at (a, b) along and across
+ * segments of half lengths `half` is outside every super-ellipse (slack_reference.
+ * separation_allowed for one point). */
+static double separation_allowed(int64_t M, const double *along, const double *across,
+                                 const double *half, double margin, double margin4)
+{
+    double out = INFINITY;
+    for (int64_t j = 0; j < M; j++) {
+        double a = fabs(along[j]), b = fabs(across[j]);
+        double a2 = a * a, b2 = b * b;
+        double a4 = a2 * a2, b4 = b2 * b2;
+        double value = margin;
+        if (a4 / pow4(half[j] + margin) + b4 / margin4 < 1.0) {
+            double m = b > a - half[j] ? b : a - half[j];
+            m = m > 1e-6 ? m : 1e-6;
+            for (int it = 0; it < 4; it++) {
+                double big = half[j] + m;
+                double ua = a4 / pow4(big), ub = b4 / pow4(m);
+                m += (ua + ub - 1.0) / (4.0 * (ua / big + ub / m));
+            }
+            value = m < margin ? m : margin;
+        }
+        if (value < out) out = value;
+    }
+    return out;
+}
+
+/* scratch: 6 * M doubles. Returns 1 when a point needs a slack, else 0 (all out zero). */
+int64_t forced_slack_at(int64_t n, const double *px, const double *py, const double *heading,
+                        int64_t M, const double *seg, double margin, double slack_min,
+                        double *out, double *scratch)
+{
+    double *ex = scratch, *ey = scratch + M, *half = scratch + 2 * M;
+    double *along = scratch + 3 * M, *across = scratch + 4 * M;
+    double far2 = (1.25 * margin) * (1.25 * margin) * (1.0 + 1e-9);
+    double margin4 = pow(margin, 4.0);
+    for (int64_t i = 0; i < n; i++) out[i] = 0.0;
+    if (M == 0) return 0;
+    for (int64_t j = 0; j < M; j++) {
+        ex[j] = cos(seg[4 * j + 2]);
+        ey[j] = sin(seg[4 * j + 2]);
+        half[j] = 0.5 * seg[4 * j + 3];
+    }
+    /* every point at least 1.25 margin from every segment: no slack anywhere */
+    double nearest2 = INFINITY;
+    for (int64_t i = 0; i < n; i++)
+        for (int64_t j = 0; j < M; j++) {
+            double dx = px[i] - seg[4 * j], dy = py[i] - seg[4 * j + 1];
+            double al = dx * ex[j] + dy * ey[j], ac = dy * ex[j] - dx * ey[j];
+            double cl = al > -half[j] ? al : -half[j];
+            cl = cl < half[j] ? cl : half[j];
+            double va = cl - al, vc = -ac;
+            double r2 = va * va + vc * vc;
+            if (r2 < nearest2) nearest2 = r2;
+        }
+    if (nearest2 >= far2) return 0;
+    int64_t any = 0;
+    for (int64_t i = 0; i < n; i++) {
+        double nx = -sin(heading[i]), ny = cos(heading[i]);
+        double port = INFINITY, starboard = INFINITY;
+        double *na = scratch + 5 * M;  /* the normal along each segment, for the shift */
+        for (int64_t j = 0; j < M; j++) {
+            double dx = px[i] - seg[4 * j], dy = py[i] - seg[4 * j + 1];
+            double al = dx * ex[j] + dy * ey[j], ac = dy * ex[j] - dx * ey[j];
+            along[j] = al;
+            across[j] = ac;
+            double cl = al > -half[j] ? al : -half[j];
+            cl = cl < half[j] ? cl : half[j];
+            double va = cl - al, vc = -ac;
+            double dist = hypot(va, vc);
+            double n_along = nx * ex[j] + ny * ey[j], n_across = ny * ex[j] - nx * ey[j];
+            na[j] = n_along;
+            double side = va * n_along + vc * n_across;
+            if (fabs(side) >= 0.5 * dist) {
+                if (side < 0 && dist < port) port = dist;
+                if (side > 0 && dist < starboard) starboard = dist;
+            }
+        }
+        if (!(port + starboard < 2.5 * margin)) continue;
+        double shift = 0.5 * (starboard - port);
+        for (int64_t j = 0; j < M; j++) {
+            double n_across = ny * ex[j] - nx * ey[j];
+            along[j] = along[j] + shift * na[j];
+            across[j] = across[j] + shift * n_across;
+        }
+        double allowed = separation_allowed(M, along, across, half, margin, margin4);
+        double v = allowed - margin;
+        v = v < 0.0 ? v : 0.0;
+        out[i] = v > slack_min ? v : slack_min;
+        any = 1;
+    }
+    return any;
+}

@@ -1,0 +1,59 @@
+"""The compiled path geometry against its numpy twins: the path frame of points and the
+forced slack, on random paths, points and walls (narrow stretches included, so that the
+slack is forced), within an ulp's worth of the sines and cosines."""
+
+import numpy as np
+import pytest
+
+from controller.nmpc.path_geometry import geometry_kernel
+from controller.nmpc.reference import waypoint_path
+from controller.nmpc.slack_reference import forced_slack_at, forced_slack_at_numpy
+
+pytestmark = pytest.mark.skipif(geometry_kernel() is None, reason="no C compiler")
+
+
+def _random_path(rng):
+    steps = rng.uniform(5.0, 40.0, size=(rng.integers(2, 8), 1))
+    turns = np.cumsum(rng.uniform(-1.0, 1.0, size=len(steps)))
+    legs = steps * np.column_stack([np.cos(turns), np.sin(turns)])
+    return waypoint_path(np.vstack([[0.0, 0.0], np.cumsum(legs, axis=0)]))
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_path_frame_is_its_numpy_twin(seed):
+    rng = np.random.default_rng(seed)
+    path = _random_path(rng)
+    points = rng.uniform(-30.0, 120.0, size=(rng.integers(1, 60), 2))
+    for s_min, s_max in ((0.0, None), (rng.uniform(0, path.length), None),
+                         (5.0, path.length * 0.6), (path.length + 5, None)):
+        s, d = path.frame(points, s_min, s_max)
+        s0, d0 = path.frame_numpy(points, s_min, s_max)
+        np.testing.assert_allclose(s, s0, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(d, d0, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_forced_slack_is_its_numpy_twin(seed):
+    rng = np.random.default_rng(100 + seed)
+    n = int(rng.integers(1, 50))
+    # walls either side of a line along x, some of them closer than 2.5 margins
+    width = rng.uniform(4.0, 16.0)
+    xs = np.repeat(rng.uniform(-10.0, 60.0, size=int(rng.integers(1, 7))), 2)
+    side = np.tile([-1.0, 1.0], len(xs) // 2)  # a wall each side at each place
+    segs = np.column_stack([xs, side * width / 2 + rng.normal(0, 0.5, len(xs)),
+                            rng.normal(0, 0.3, len(xs)), rng.uniform(10.0, 30.0, len(xs))])
+    points = np.column_stack([rng.uniform(-5.0, 55.0, n), rng.normal(0.0, 1.0, n)])
+    headings = rng.normal(0.0, 0.2, n)
+    margin, slack_min = 5.0, -4.9
+    got = forced_slack_at(points, headings, segs, margin, slack_min)
+    want = forced_slack_at_numpy(points, headings, segs, margin, slack_min)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
+    if width < 8.0:
+        assert (want < 0).any()  # the narrow cases do force a slack
+
+
+def test_forced_slack_of_no_walls_or_far_walls_is_zero():
+    points = np.zeros((3, 2))
+    assert not forced_slack_at(points, np.zeros(3), np.zeros((0, 4)), 5.0, -4.9).any()
+    far = np.array([[0.0, 30.0, 0.0, 10.0]])
+    assert not forced_slack_at(points, np.zeros(3), far, 5.0, -4.9).any()
