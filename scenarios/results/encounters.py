@@ -108,7 +108,8 @@ class TrackingWatch:
     Tracks that mean no boat: a confirmed track matching no vessel whose centre lies within
     `wall_m` of a true wall (`walls`, polylines) is a wall taken for a boat, moving or not;
     their number, the longest and their total time are counted. Track continuity: each
-    vessel's matched track ids in time; a change of id is a switch."""
+    vessel is matched to one track a step (nearest pairs first); a change of that id is a
+    switch, and another track near a matched vessel is a duplicate (one boat as two)."""
 
     def __init__(self, vessels, match_m: float = 6.0, visible_m: float = 60.0, walls=(),
                  wall_m: float = 1.0):
@@ -122,6 +123,7 @@ class TrackingWatch:
         self._on_wall: dict = {}  # track id -> seconds on a wall
         self._ids = [None] * len(self.vessels)  # the id last matched to each vessel
         self._switches = [0] * len(self.vessels)
+        self._duplicate: dict = {}  # track id -> seconds as a second track on a vessel
         self.saw_tracks = False
 
     def update(self, time_s: float, pose, tracks, dt: float) -> None:
@@ -135,23 +137,39 @@ class TrackingWatch:
             x, y = c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]
             if np.any((np.abs(x) <= self.visible_m) & (np.abs(y) <= self.visible_m)):
                 self.first_visible[k] = time_s
-        for tr in tracks:
+        # One track per vessel, nearest pairs first (each track and vessel used once): the
+        # vessel's track this step. A second track near a matched vessel is a duplicate
+        # (one boat seen as two), counted apart from the switches of the matched id.
+        near = sorted((float(np.hypot(*(np.asarray(tr.position, float) - vp[:2]))), k, i)
+                      for i, tr in enumerate(tracks) for k, (vp, _) in enumerate(truth))
+        matched, taken = {}, set()
+        for dist, k, i in near:
+            if dist > self.match_m:
+                break
+            if k not in matched and i not in taken:
+                matched[k] = i
+                taken.add(i)
+        for k, i in matched.items():
+            tr = tracks[i]
+            if self._ids[k] is not None and self._ids[k] != tr.id:
+                self._switches[k] += 1
+            self._ids[k] = tr.id
+            self._pos_err.append(float(np.hypot(*(np.asarray(tr.position, float)
+                                                  - truth[k][0][:2]))))
+            self._vel_err.append(float(np.hypot(*(np.asarray(tr.velocity) - truth[k][1]))))
+            if self.first_confirmed[k] is None:
+                self.first_confirmed[k] = time_s
+        for i, tr in enumerate(tracks):
+            if i in taken:
+                continue
             p = np.asarray(tr.position, float)
-            dist = [np.hypot(*(p - vp[:2])) for vp, _ in truth]
-            k = int(np.argmin(dist)) if dist else -1
-            if k >= 0 and dist[k] <= self.match_m:
-                if self._ids[k] is not None and self._ids[k] != tr.id:
-                    self._switches[k] += 1
-                self._ids[k] = tr.id
-                self._pos_err.append(dist[k])
-                self._vel_err.append(float(np.hypot(*(np.asarray(tr.velocity) - truth[k][1]))))
-                if self.first_confirmed[k] is None:
-                    self.first_confirmed[k] = time_s
-            else:
-                if getattr(tr, "moving", True):
-                    self._false[tr.id] = self._false.get(tr.id, 0.0) + dt
-                if self.walls and distance_to_polylines(p, self.walls)[0] <= self.wall_m:
-                    self._on_wall[tr.id] = self._on_wall.get(tr.id, 0.0) + dt
+            if any(np.hypot(*(p - vp[:2])) <= self.match_m for vp, _ in truth):
+                self._duplicate[tr.id] = self._duplicate.get(tr.id, 0.0) + dt
+                continue
+            if getattr(tr, "moving", True):
+                self._false[tr.id] = self._false.get(tr.id, 0.0) + dt
+            if self.walls and distance_to_polylines(p, self.walls)[0] <= self.wall_m:
+                self._on_wall[tr.id] = self._on_wall.get(tr.id, 0.0) + dt
 
     def summary(self) -> dict:
         def rms(x):
@@ -168,4 +186,7 @@ class TrackingWatch:
                 "longest_wall_track_s": round(max(self._on_wall.values()), 3)
                 if self._on_wall else 0.0,
                 "wall_track_time_s": round(sum(self._on_wall.values()), 3),
-                "id_switches": dict(zip((v.name for v in self.vessels), self._switches))}
+                "id_switches": dict(zip((v.name for v in self.vessels), self._switches)),
+                "duplicate_tracks": len(self._duplicate),
+                "longest_duplicate_s": round(max(self._duplicate.values()), 3)
+                if self._duplicate else 0.0}

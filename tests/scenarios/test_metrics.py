@@ -181,3 +181,20 @@ def test_tracks_on_walls_and_id_switches_are_counted():
     assert out["longest_wall_track_s"] == pytest.approx(3.0)
     assert out["wall_track_time_s"] == pytest.approx(3.5)
     assert out["id_switches"] == {"launch": 1}
+
+
+def test_a_vessel_seen_as_two_tracks_is_a_duplicate_not_switches():
+    """One vessel with two tracks at once (a hull split in two): the nearer is its track, the
+    other a duplicate; the vessel's id does not switch back and forth between them."""
+    from scenarios.results.encounters import TrackingWatch
+
+    watch = TrackingWatch([_Stub()])
+    for k in range(20):
+        t = 0.1 * k
+        near, far = (0.2, 2.0) if k % 2 else (0.3, 2.5)  # track 1 always the nearer
+        tracks = [_track(2, t + far, 0.0, True), _track(1, t + near, 0.0, True)]
+        watch.update(t, np.array([-20.0, 0.0, 0.0]), tracks, 0.1)
+    out = watch.summary()
+    assert out["id_switches"] == {"launch": 0}
+    assert out["duplicate_tracks"] == 1 and out["longest_duplicate_s"] == pytest.approx(2.0)
+    assert out["false_vessel_tracks"] == 0 and out["position_rms_m"] < 0.31
