@@ -28,6 +28,8 @@ from functools import cached_property
 
 import numpy as np
 
+from .wall_cells import fraction_on
+
 # `cfg` below is a `tracking.TrackerConfig` (it holds the thresholds); not imported, so that
 # the tracker uses this module and not the other way round.
 
@@ -59,6 +61,9 @@ class Clusters:
     viewpoints: np.ndarray = field(default_factory=lambda: np.array([[0.0, 0.0, np.nan]]))
     hull_returns: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     band_top_m: float = 0.0
+    # Inertial returns of the confident walls (segments or chains longer than any vessel),
+    # when asked for (`collect_wall_points`): what `wall_cells` remembers.
+    wall_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
     def __len__(self) -> int:
         return len(self.count)
@@ -100,6 +105,26 @@ def wall_segments(segments: np.ndarray, cfg: "TrackerConfig", known=None) -> np.
     m = len(s)
     if not m:
         return np.zeros(0, bool)
+    wall = chained_walls(s, cfg)
+    lines = s[wall]
+    if known is not None and len(known):
+        lines = np.concatenate([lines, np.asarray(known)[:, :4]])
+    if len(lines) and not wall.all():
+        # On the line of a wall, however far from it: the same quay behind a moored boat.
+        length = s[:, 3]
+        half = 0.5 * length[:, None] * np.column_stack([np.cos(s[:, 2]), np.sin(s[:, 2])])
+        ends = np.concatenate([s[:, :2] - half, s[:, :2] + half])
+        on = _on_lines(ends, np.concatenate([s[:, 2], s[:, 2]]), lines, cfg)
+        wall |= (on[:m] & on[m:]).any(axis=1)
+    return wall
+
+
+def chained_walls(s: np.ndarray, cfg: "TrackerConfig") -> np.ndarray:
+    """(M,) bool: the confident walls among (M, 4) segments, those longer than any vessel
+    alone or as a chain of pieces (see `wall_segments`)."""
+    m = len(s)
+    if not m:
+        return np.zeros(0, bool)
     length = s[:, 3]
     half = 0.5 * length[:, None] * np.column_stack([np.cos(s[:, 2]), np.sin(s[:, 2])])
     ends = np.concatenate([s[:, :2] - half, s[:, :2] + half])  # end e belongs to e % m
@@ -121,15 +146,7 @@ def wall_segments(segments: np.ndarray, cfg: "TrackerConfig", known=None) -> np.
         chain[root(a)] = root(b)
     chain = np.array([root(k) for k in range(m)])
     total = np.bincount(chain, length, minlength=m)
-    wall = (length > cfg.max_vessel_length_m) | (total[chain] > cfg.max_vessel_length_m)
-    lines = s[wall]
-    if known is not None and len(known):
-        lines = np.concatenate([lines, np.asarray(known)[:, :4]])
-    if len(lines) and not wall.all():
-        # On the line of a wall, however far from it: the same quay behind a moored boat.
-        on = _on_lines(ends, np.concatenate([s[:, 2], s[:, 2]]), lines, cfg)
-        wall |= (on[:m] & on[m:]).any(axis=1)
-    return wall
+    return (length > cfg.max_vessel_length_m) | (total[chain] > cfg.max_vessel_length_m)
 
 
 def _on_lines(points: np.ndarray, direction: np.ndarray, lines: np.ndarray,
@@ -176,14 +193,17 @@ def remember_walls(memory: np.ndarray, segments: np.ndarray, time_s: float,
 
 
 def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "TrackerConfig",
-                  known_walls=None, occluders=None, hull_returns=None) -> Clusters:
+                  known_walls=None, occluders=None, hull_returns=None, wall_cells=None,
+                  collect_wall_points: bool = False) -> Clusters:
     """The clusters among cropped body-frame points `xy_body` (N, 2) that no wall segment
     (inertial (M, 4), from the same scan) explains, placed with `pose` (x, y, psi).
     `occluders` (K, 2): body-frame points of every return that can hide something (the crop
     with a taller height band; default `xy_body`), and `hull_returns` (H, 3) body-frame x, y
     and height of the own hull's (when `cfg.viewpoints` places the LiDARs), for `free_space`.
     `known_walls` (K, 4+): wall lines of earlier scans (`remember_walls`); a segment or a
-    cluster lying along one is that wall too."""
+    cluster lying along one is that wall too. `wall_cells` (`wall_cells.WallCells`): where
+    walls were seen; a cluster mostly in those cells is wall. `collect_wall_points`: return
+    the confident walls' returns (inertial) in `wall_points`, for that memory."""
     import cv2
 
     det = cfg.detection
@@ -196,6 +216,12 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
     xy = xy_body
     if walls.any():
         xy = xy[~_on_walls(xy, segments[walls], (x0, y0, c, s), cfg)]
+    wall_points = _NO_POINTS
+    if collect_wall_points and len(segments):
+        confident = chained_walls(np.asarray(segments, float).reshape(-1, 4), cfg)
+        if confident.any():
+            on = xy_body[_on_walls(xy_body, segments[confident], (x0, y0, c, s), cfg)]
+            wall_points = on @ np.array([[c, s], [-s, c]]) + (x0, y0)
     r = det.range_m
     n = int(math.ceil(2 * r / cfg.cell_m))
     i = np.floor((xy[:, 0] + r) * (1.0 / cfg.cell_m)).astype(np.intp)
@@ -259,7 +285,10 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
         mid = 0.5 * (pu.max() + pu.min()) * u + 0.5 * (pv.max() + pv.min()) * v
         if lv > lu:
             theta, lu, lv = theta + math.pi / 2, lv, lu
-        if lu > cfg.max_vessel_length_m or (len(lines) and _along_wall(hull, theta, lines, frame, cfg)):
+        if lu > cfg.max_vessel_length_m or (len(lines) and _along_wall(hull, theta, lines, frame, cfg)) \
+                or (wall_cells is not None and fraction_on(
+                    wall_cells, pts @ np.array([[c, s], [-s, c]]) + (x0, y0),
+                    cfg.wall_cells_m) >= cfg.wall_cells_share):
             from_side.pop()
             continue  # a piece of wall
         faces.append(face_of.get(k, _NO_FACES))
@@ -281,7 +310,7 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
     return Clusters(centre, angle, np.asarray(from_side, bool), np.asarray(size, float).reshape(-1, 2),
                     np.asarray(counts, int), hulls, tuple(edges), walls,
                     xy_body if occluders is None else occluders, (x0, y0, psi), tuple(faces),
-                    *_viewpoints(cfg, hull_returns))
+                    *_viewpoints(cfg, hull_returns), wall_points)
 
 
 def _viewpoints(cfg, hull_returns) -> tuple:
@@ -329,6 +358,7 @@ def _side_angles(segments: np.ndarray, labels: np.ndarray, n_labels: int, frame,
 
 
 _NO_FACES = np.zeros((0, 2, 2))
+_NO_POINTS = np.zeros((0, 2))
 
 
 def _find(root: np.ndarray, k: int) -> int:

@@ -41,6 +41,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..geometry import wrap_angle
+from . import wall_cells
 from .clusters import Clusters, find_clusters, free_space, remember_walls
 from ..kernels import pointer
 from .cloud_crop import crop_kernel
@@ -102,6 +103,14 @@ class TrackerConfig:
     # beyond moored boats; a wall's far end broken up at grazing angles).
     wall_memory_s: float = 30.0
     wall_reach_m: float = 120.0
+    # Wall cells (`wall_cells`): where confident walls' returns fell, remembered this long,
+    # taken every wall_cells_every_s; a cluster with this share of its points in them (or
+    # next to them) is wall, whatever the wall's shape (a curved quay seen from afar);
+    # a share above 1 turns the check off.
+    wall_cells_m: float = 0.5
+    wall_cells_memory_s: float = 300.0
+    wall_cells_every_s: float = 1.0
+    wall_cells_share: float = 0.6
 
     def __post_init__(self) -> None:
         if not isinstance(self.detection, DetectionConfig):
@@ -360,6 +369,7 @@ class VesselTracker:
         self._time_s: float | None = None
         self.counts = dict.fromkeys(STATUSES, 0)  # over the run
         self._walls = np.zeros((0, 5))  # wall lines seen lately (clusters.remember_walls)
+        self._cells = wall_cells.WallCells.empty()  # where walls were seen (wall_cells)
         # Imported now, not on the first scan with a cluster or the first birth (filterpy's
         # import takes a second or two): a perception worker builds its tracker while the
         # loop sets up, instead of stalling a scan in the run.
@@ -408,7 +418,12 @@ class VesselTracker:
         if not cropped:
             cloud = crop_rows(cloud, self._occluder_crop)
         occluders, xy, hull = split_crop(cloud, cfg)
-        found = find_clusters(xy, p, segs, cfg, self._walls, occluders, hull)
+        collect = wall_cells.due(self._cells, t, cfg.wall_cells_every_s)
+        found = find_clusters(xy, p, segs, cfg, self._walls, occluders, hull, self._cells,
+                              collect)
+        if collect:
+            self._cells = wall_cells.remember(self._cells, found.wall_points, t,
+                                              cfg.wall_cells_m, cfg.wall_cells_memory_s)
         self._walls = remember_walls(self._walls, segs[segs[:, 3] > cfg.max_vessel_length_m],
                                      t, cfg)
         self._associate(t, found, p)
