@@ -163,7 +163,8 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
     takes = inspect.signature(controller.step).parameters
     takes_blind, takes_vessels = "blind" in takes, "vessels" in takes
     encounters = EncounterWatch(cfg.vessels)
-    tracking = TrackingWatch(cfg.vessels, walls=cfg.walls)
+    tracking = TrackingWatch(cfg.vessels, walls=cfg.walls,
+                             objects=tuple(o.outline for o in cfg.obstacles))
     perceive = getattr(perception, "perceive", None) or perception.segments
     prepare = getattr(controller, "prepare", None)  # an NMPC's preparation phase
     wall0 = time.perf_counter()

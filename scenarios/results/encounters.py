@@ -106,13 +106,15 @@ class TrackingWatch:
     from before the first line of sight).
 
     Tracks that mean no boat: a confirmed track matching no vessel whose centre lies within
-    `wall_m` of a true wall (`walls`, polylines) is a wall taken for a boat, moving or not;
+    `wall_m` of a true wall (`walls`, polylines) and not within `object_m` of a static object
+    in the water (`objects`, outlines: a moored boat, a pier) is a wall taken for a boat,
+    moving or not;
     their number, the longest and their total time are counted. Track continuity: each
     vessel is matched to one track a step (nearest pairs first); a change of that id is a
     switch, and another track near a matched vessel is a duplicate (one boat as two)."""
 
     def __init__(self, vessels, match_m: float = 6.0, visible_m: float = 60.0, walls=(),
-                 wall_m: float = 1.0):
+                 wall_m: float = 1.0, objects=(), object_m: float = 2.0):
         self.vessels = tuple(vessels)
         self.match_m, self.visible_m = match_m, visible_m
         self._pos_err, self._vel_err = [], []
@@ -120,6 +122,7 @@ class TrackingWatch:
         self.first_confirmed = [None] * len(self.vessels)
         self._false: dict = {}  # track id -> seconds as a false moving vessel
         self.walls, self.wall_m = tuple(walls), wall_m
+        self.objects, self.object_m = tuple(objects), object_m  # moored boats, piers: real
         self._on_wall: dict = {}  # track id -> seconds on a wall
         self._ids = [None] * len(self.vessels)  # the id last matched to each vessel
         self._switches = [0] * len(self.vessels)
@@ -168,6 +171,8 @@ class TrackingWatch:
                 continue
             if getattr(tr, "moving", True):
                 self._false[tr.id] = self._false.get(tr.id, 0.0) + dt
+            if self.objects and distance_to_polylines(p, self.objects)[0] <= self.object_m:
+                continue  # a static object in the water (a moored boat), not a wall
             if self.walls and distance_to_polylines(p, self.walls)[0] <= self.wall_m:
                 self._on_wall[tr.id] = self._on_wall.get(tr.id, 0.0) + dt
 

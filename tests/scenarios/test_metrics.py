@@ -198,3 +198,16 @@ def test_a_vessel_seen_as_two_tracks_is_a_duplicate_not_switches():
     assert out["id_switches"] == {"launch": 0}
     assert out["duplicate_tracks"] == 1 and out["longest_duplicate_s"] == pytest.approx(2.0)
     assert out["false_vessel_tracks"] == 0 and out["position_rms_m"] < 0.31
+
+
+def test_a_track_on_a_moored_boat_beside_the_quay_is_no_wall_track():
+    from scenarios.results.encounters import TrackingWatch
+
+    wall = np.array([[-50.0, 10.0], [200.0, 10.0]])
+    moored = np.array([[30.0, 7.0], [40.0, 7.0], [40.0, 9.8], [30.0, 9.8], [30.0, 7.0]])
+    watch = TrackingWatch([], walls=[wall], objects=[moored])
+    for k in range(20):
+        watch.update(0.1 * k, np.array([0.0, 0.0, 0.0]),
+                     [_track(3, 30.5, 9.3, False), _track(4, 60.0, 9.5, False)], 0.1)
+    out = watch.summary()
+    assert out["wall_tracks"] == 1 and out["longest_wall_track_s"] == pytest.approx(2.0)
