@@ -137,6 +137,23 @@ def _int(x, default: int = 0) -> int:
         return default
 
 
+def clock_faults_checked(faults) -> list:
+    """(at_s, step_s) pairs in time order: at `at_s` (clock seconds after start) the
+    autopilot stalls for `step_s` and runs that far behind from then on; a negative step
+    jumps its clock ahead (the physics catches up at once)."""
+    out = []
+    for item in faults:
+        try:
+            at, step = (float(v) for v in item)
+        except (TypeError, ValueError):
+            raise InputError(f"clock fault {item!r}: expected (at_s, step_s) numbers") from None
+        if not (math.isfinite(at) and at >= 0 and math.isfinite(step) and step != 0):
+            raise InputError(f"clock fault {item!r}: at_s >= 0 and a non-zero finite step_s "
+                             "needed")
+        out.append((at, step))
+    return sorted(out)
+
+
 class AutopilotSim:
     """The simulated autopilot on one MAVLink connection; drive it with `pump(now)`."""
 
@@ -144,7 +161,7 @@ class AutopilotSim:
                  signing_key: bytes | None = None, params: dict | None = None,
                  ekf_delay_s: float = 20.0, legacy_param_names: bool = False,
                  work_dir=None, physics_step_s: float = 0.01, system_id: int = 1,
-                 init_s: float = 3.0, log_dir=None, ekf_noise=None):
+                 init_s: float = 3.0, log_dir=None, ekf_noise=None, clock_faults=()):
         if not physics_step_s > 0:
             raise InputError(f"physics step must be positive, got {physics_step_s}")
         if not (math.isfinite(init_s) and init_s >= 0):
@@ -180,7 +197,8 @@ class AutopilotSim:
         except BaseException:
             self.close()
             raise
-        self._t0 = clock.now()
+        self._t0 = self._start = clock.now()
+        self._clock_faults = clock_faults_checked(clock_faults)
         self._steps = 0
         self._outputs = (0.0, 0.0)
         if log_dir is not None:
@@ -340,6 +358,12 @@ class AutopilotSim:
         `now` is clock time; the physics' time 0 is the clock's time at construction."""
         if self._conn is None:
             return
+        if self._clock_faults and now - self._start >= self._clock_faults[0][0]:
+            at, step = self._clock_faults[0]
+            if step > 0 and now - self._start < at + step:
+                return  # stalled, as SITL under load: nothing handled, stepped or sent
+            self._clock_faults.pop(0)
+            self._t0 += step  # its clock now runs `step` behind (< 0: ahead, caught up)
         if not self._initialised and self.boot_s >= self.init_s - 1e-9:
             self._finish_init()
         self._receive_all()

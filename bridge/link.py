@@ -113,6 +113,7 @@ class LinkCounters:
     bad_data: int = 0  # bytes that did not parse (garbage, CRC errors)
     autopilot_restarts: int = 0  # time_boot_ms went backwards
     frame_mismatches: int = 0  # LOCAL_POSITION_NED and GLOBAL_POSITION_INT disagreed
+    clock_jumps: int = 0  # the autopilot's clock stalled or jumped (boot_clock re-anchored)
 
 
 def parse_url(url: str) -> tuple[str, int]:
@@ -463,7 +464,13 @@ class AutopilotLink:
             return
         sent = self._timesync_pending.pop(int(msg.ts1), None)
         if sent is not None:
+            jumps = self.boot_clock.jumps
             self.boot_clock.timesync(sent, now, msg.tc1 * 1e-9)
+            if self.boot_clock.jumps > jumps:
+                self.counters.clock_jumps += 1
+                step = self.boot_clock.last_jump_s
+                self.notices.append((now, f"the autopilot's clock {'fell behind' if step > 0 else 'jumped ahead'} "
+                                          f"by {abs(step) * 1e3:.0f} ms: its time mapping anchored again"))
 
     # -- state ---------------------------------------------------------------------------------
     @property

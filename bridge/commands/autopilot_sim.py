@@ -45,7 +45,28 @@ def register(sub) -> None:
                    help="use the parameter names of ArduPilot 4.5 (SYSID_MYGCS, ARMING_CHECK)")
     p.add_argument("--system-id", type=int, default=1, metavar="N",
                    help="the autopilot's MAVLink system id (default 1)")
+    p.add_argument("--clock-fault", action="append", default=[], metavar="AT:STEP",
+                   help="the autopilot's clock stalls at AT seconds after start for STEP "
+                   "seconds and stays that far behind (a negative STEP: it jumps ahead), as "
+                   "SITL's under load; repeatable, e.g. --clock-fault 60:0.6")
     p.set_defaults(func=run)
+
+
+def parse_clock_faults(items: list[str]) -> list[tuple[float, float]]:
+    """AT:STEP strings to pairs; InputError names the bad item."""
+    from controller.errors import InputError
+
+    out = []
+    for item in items:
+        at, sep, step = item.partition(":")
+        try:
+            if not sep:
+                raise ValueError
+            out.append((float(at), float(step)))
+        except ValueError:
+            raise InputError(f"--clock-fault {item!r}: expected AT:STEP in seconds, e.g. "
+                             "60:0.6") from None
+    return out
 
 
 def parse_params(items: list[str]) -> dict[str, float]:
@@ -86,7 +107,8 @@ def run(args) -> int:
     clock = RealClock(args.speedup)
     sim = AutopilotSim(scenario, args.listen, clock, seed=seed, signing_key=key, params=params,
                        ekf_delay_s=args.ekf_delay, legacy_param_names=args.legacy_param_names,
-                       system_id=args.system_id, init_s=args.init_delay, log_dir=args.log)
+                       system_id=args.system_id, init_s=args.init_delay, log_dir=args.log,
+                       clock_faults=parse_clock_faults(args.clock_fault))
 
     def terminate(signum, frame):
         raise KeyboardInterrupt
