@@ -56,6 +56,7 @@ class CosimResult:
     summary: dict
     timing: dict
     log_path: Path
+    scenario: object  # the embedded scenario the run was scored against
     states: np.ndarray = field(default_factory=lambda: np.empty((0, 7)))  # t, x..r per step
 
 
@@ -274,7 +275,7 @@ def run_cosim(folder: str | Path, out_dir: str | Path, duration_s: float | None 
               "steps": len(rows_t) * per_period}
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     (out / "timing.json").write_text(json.dumps(timing, indent=2) + "\n")
-    return CosimResult(summary, timing, out / "log.csv", np.array(states, float))
+    return CosimResult(summary, timing, out / "log.csv", scenario, np.array(states, float))
 
 
 def _failure_reason(nav_log: Path) -> str:
