@@ -54,8 +54,7 @@ def register(sub) -> None:
     _add_scenario_arguments(s)
     s.add_argument("-o", "--out", required=True, help="the system folder")
     s.add_argument("--step", type=_step, default=None, help="communication step in s; must "
-                   "divide the IMU period 0.01 s (default 0.0005: the command reaches the boat "
-                   "one step late, as in any co-simulation)")
+                   "divide the IMU period 0.01 s (default 0.01)")
     s.set_defaults(func=run_system)
 
     c = sub.add_parser(

@@ -12,9 +12,9 @@ from xml.etree.ElementTree import Element, SubElement
 from fmu.variables import UNITS
 from scenarios.cosim.nav_variables import IMU_PERIOD_S, UNIT_NAMES
 
-SYSTEM_STEP_S = 0.0005
-"""The co-simulation's communication step: the navigation FMU's command reaches the boat one
-step late, as in any co-simulation master; 0.5 ms keeps that delay small (see README)."""
+SYSTEM_STEP_S = 0.01
+"""The co-simulation's communication step: the IMU period, the boat's step in `canalnav run`
+(the navigation FMU works one step ahead, so the master's one-step delay cancels)."""
 
 
 @dataclass(frozen=True)

@@ -3,8 +3,9 @@ from `nav_model`; pythonfmu's Real has no unit, so units are added to the descri
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
-from xml.etree.ElementTree import Element
+from xml.etree.ElementTree import Element, SubElement
 
 from pythonfmu import (DefaultExperiment, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer,
                        Real, String)
@@ -15,6 +16,10 @@ from scenarios.cosim.nav_model import SCENARIO_RESOURCE, NavigationModel
 from scenarios.cosim.nav_variables import VARIABLES
 
 _KINDS = {"real": Real, "integer": Integer, "string": String}
+_PINNED: list = []
+"""One reference to the FMU's script module per instance: pythonfmu 0.7's fmi2FreeInstance
+drops one reference too many to it, which left the module freed under sys.modules and made
+a second instance in the process crash or fail."""
 
 
 class _UnitReal(Real):
@@ -38,6 +43,7 @@ class NavigationFmi2(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
+        _PINNED.append(sys.modules.get(type(self).__module__))
         self.model = NavigationModel(self.resources)
         meta = describe_model(Path(self.resources or ".") / SCENARIO_RESOURCE)
         self.description = meta.description
@@ -59,8 +65,12 @@ class NavigationFmi2(Fmi2Slave):
     def to_xml(self, model_options=dict()) -> Element:
         root = super().to_xml(model_options)
         root.insert(1, unit_definitions_fmi2())
-        for unknown in root.iter("Unknown"):  # outputs depend on no input within a step
+        structure = root.find("ModelStructure")
+        outputs = structure.find("Outputs")
+        initial = SubElement(structure, "InitialUnknowns")  # the outputs are calculated
+        for unknown in outputs:  # and depend on no input within a step
             unknown.set("dependencies", "")
+            SubElement(initial, "Unknown", index=unknown.get("index"), dependencies="")
         return root
 
     def exit_initialization_mode(self):

@@ -1,10 +1,13 @@
 """The navigation FMU's behaviour between FMI calls, shared by its FMI 2 and FMI 3 wrappers.
 
 The wrappers only translate FMI onto `values` and these methods. The stack starts when
-initialisation ends (the parameters are set by then); each communication step that starts
-on an IMU instant feeds it the boat's outputs, and one that starts on a control instant
-(every 0.1 s) asks the controller and updates the outputs. A failure never raises: it is a
-status, a reason for the FMU's log, and False from `step` (the FMI error state).
+initialisation ends (the parameters and the boat's initial outputs are set by then) and
+decides the command for t = 0 there. A master passes outputs on after the step, so each
+step from t works one step ahead (`lookahead`): when t + h is an IMU instant the stack gets
+the boat's outputs extrapolated to t + h, and when it is a control instant (every 0.1 s) the
+controller decides for t + h, which the boat then holds from t + h as in `canalnav run`.
+A failure never raises: it is a status, a reason for the FMU's log, and False from `step`
+(the FMI error state).
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ import numpy as np
 
 from scenarios.cosim.nav_variables import (ACCEL_INPUTS, ACTUATOR_INPUTS, IMU_PERIOD_S,
                                            STATE_INPUTS, VARIABLES)
+from scenarios.cosim.lookahead import BoatSample, ahead
 from scenarios.cosim.navigation import STATUS_CODES, NavigationStack
 
 SCENARIO_RESOURCE = "scenario.json"
@@ -41,6 +45,7 @@ class NavigationModel:
         self.stack: NavigationStack | None = None
         self.error: str | None = None  # why the FMU is in its error state
         self._imu_k = -1  # the last IMU instant fed to the stack
+        self._before = None  # the boat's outputs at the last communication point
         self._log = None
         self._log_file = None
 
@@ -69,11 +74,18 @@ class NavigationModel:
                 self._log.writerow(LOG_COLUMNS)
         except (CanalnavError, OSError, ValueError) as exc:
             return self._fail(f"cannot start the navigation: {exc}")
-        return None
+        try:
+            now = self._sample()
+            self.stack.start(now.state)
+            self._imu_k = 0
+            self._decide(0.0, now)
+        except Exception as exc:  # noqa: BLE001 - the master must never see it raise
+            return self._fail(_reason(exc, 0.0))
+        return self.error
 
     def step(self, time_s: float, step_s: float) -> bool:
-        """One communication step from `time_s` with the inputs at `time_s`; False (and
-        `error` set) when the FMU is, or now goes, into its error state."""
+        """One communication step from `time_s` with the boat's outputs at `time_s`; False
+        (and `error` set) when the FMU is, or now goes, into its error state."""
         if self.error is not None:
             return False
         ratio = IMU_PERIOD_S / step_s if step_s > 0 else math.inf
@@ -81,34 +93,34 @@ class NavigationModel:
             self._fail(f"communication step {step_s:g} s: the navigation FMU needs a step "
                        f"that divides the IMU period {IMU_PERIOD_S:g} s (e.g. 0.01 or 0.005 s)")
             return False
-        k = round(time_s / IMU_PERIOD_S)
-        if abs(time_s - k * IMU_PERIOD_S) > 1e-6 * step_s or k <= self._imu_k:
-            return True  # between IMU instants: the inputs are held, nothing to sample
+        now, before = self._sample(), self._before
+        self._before = now
+        t_next = time_s + step_s
+        k = round(t_next / IMU_PERIOD_S)
+        if abs(t_next - k * IMU_PERIOD_S) > 1e-6 * step_s or k <= self._imu_k:
+            return True  # the step ends between IMU instants: nothing is sampled
         try:
-            self._on_imu_instant(k)
+            command = (self.values["nT"], self.values["nS"])
+            then = ahead(now, before, command, step_s)
+            self.stack.sense(then.state, then.state_dot())
+            self._imu_k = k
+            if k % round(self.stack.control_period_s / IMU_PERIOD_S) == 0:
+                self._decide(k * IMU_PERIOD_S, then)
         except Exception as exc:  # noqa: BLE001 - the master must never see it raise
-            last = traceback.extract_tb(exc.__traceback__)[-1]
-            self._fail(f"navigation failed at t = {time_s:.2f} s: {type(exc).__name__}: {exc} "
-                       f"({Path(last.filename).name}:{last.lineno})")
+            self._fail(_reason(exc, t_next))
             return False
         return self.error is None
 
-    def _on_imu_instant(self, k: int) -> None:
+    def _sample(self) -> BoatSample:
         v = self.values
-        state = np.array([v[n] for n in STATE_INPUTS], float)
-        if self._imu_k < 0:
-            self.stack.start(state)
-        else:
-            c, s = math.cos(state[2]), math.sin(state[2])
-            xdot = np.array([c * state[3] - s * state[4], s * state[3] + c * state[4],
-                             state[5], *(v[n] for n in ACCEL_INPUTS)], float)
-            self.stack.sense(state, xdot)
-        self._imu_k = k
-        per_control = round(self.stack.control_period_s / IMU_PERIOD_S)
-        if k % per_control:
-            return
-        t = k * IMU_PERIOD_S
-        period = self.stack.control(t, state, [v[n] for n in ACTUATOR_INPUTS])
+        return BoatSample(np.array([v[n] for n in STATE_INPUTS], float),
+                          np.array([v[n] for n in ACCEL_INPUTS], float),
+                          np.array([v[n] for n in ACTUATOR_INPUTS], float))
+
+    def _decide(self, t: float, boat: BoatSample) -> None:
+        """The controller's decision at control instant `t` into the outputs and the log."""
+        v = self.values
+        period = self.stack.control(t, boat.state, boat.actuators)
         v["nT"], v["nS"] = (float(c) for c in period.command)
         v["status"] = int(period.status)
         v["slack"] = period.slack_m
@@ -137,3 +149,10 @@ class NavigationModel:
         if self.stack is not None:
             self.stack.close()
             self.stack = None
+
+
+def _reason(exc: Exception, time_s: float) -> str:
+    """An exception as one line: what, where in our code, and when."""
+    last = traceback.extract_tb(exc.__traceback__)[-1]
+    return (f"navigation failed at t = {time_s:.2f} s: {type(exc).__name__}: {exc} "
+            f"({Path(last.filename).name}:{last.lineno})")

@@ -75,4 +75,4 @@ VARIABLES: tuple[NavVariable, ...] = (
     )
 )
 
-UNIT_NAMES = tuple(sorted({v.unit for v in VARIABLES if v.unit}))
+UNIT_NAMES = tuple(sorted({v.unit for v in VARIABLES if v.unit} | {"s"}))  # "s": FMI 3.0 time
