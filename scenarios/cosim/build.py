@@ -51,7 +51,8 @@ def build_navigation_fmu(scenario_path: str | Path, out: str | Path, fmi_version
     document = scenario_document(scenario_path, overrides)
     out.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="canalnav-nav-fmu-") as tmp:
-        script = Path(tmp) / f"{MODEL_IDENTIFIER}.py"
+        # one module name per FMI version: both FMUs may run in one Python process
+        script = Path(tmp) / f"canalnav_navigation_fmi{fmi_version}.py"
         script.write_text(  # the builders look for the slave class in the script itself
             f'"""canalnav\'s navigation FMU (FMI {fmi_version}.0); its code is in the canalnav '
             f'package."""\nfrom {package} import {base}\nfrom {module} import {wrapper}\n\n\n'

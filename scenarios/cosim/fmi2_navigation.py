@@ -17,9 +17,10 @@ from scenarios.cosim.nav_variables import VARIABLES
 
 _KINDS = {"real": Real, "integer": Integer, "string": String}
 _PINNED: list = []
-"""One reference to the FMU's script module per instance: pythonfmu 0.7's fmi2FreeInstance
-drops one reference too many to it, which left the module freed under sys.modules and made
-a second instance in the process crash or fail."""
+"""One reference to the FMU's class and script module per instance: pythonfmu 0.7's
+fmi2FreeInstance drops one reference too many to them, which freed them while still in use
+and made the next instance in the process crash or fail ("module has no attribute
+'CanalnavNavigation'")."""
 
 
 class _UnitReal(Real):
@@ -43,7 +44,7 @@ class NavigationFmi2(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        _PINNED.append(sys.modules.get(type(self).__module__))
+        _PINNED.extend((type(self), sys.modules.get(type(self).__module__)))
         self.model = NavigationModel(self.resources)
         meta = describe_model(Path(self.resources or ".") / SCENARIO_RESOURCE)
         self.description = meta.description
@@ -63,7 +64,9 @@ class NavigationFmi2(Fmi2Slave):
                 setter=lambda x, n=var.name: values.__setitem__(n, x), **extra))
 
     def to_xml(self, model_options=dict()) -> Element:
-        root = super().to_xml(model_options)
+        # pythonfmu 0.7 cannot load the class again once its binary was unloaded in the
+        # process (instances while it stays loaded are fine): said as FMI 2.0 says it
+        root = super().to_xml({**model_options, "canBeInstantiatedOnlyOncePerProcess": True})
         root.insert(1, unit_definitions_fmi2())
         structure = root.find("ModelStructure")
         outputs = structure.find("Outputs")

@@ -66,16 +66,15 @@ def _started_model(short_bend_file, tmp_path) -> NavigationModel:
 
 def test_a_failing_controller_is_a_status_and_a_reason(short_bend_file, tmp_path):
     model = _started_model(short_bend_file, tmp_path)
-    assert model.step(0.0, 0.01)
-    assert model.values["nT"] > 0  # the first command is out
+    assert model.values["nT"] > 0  # the command for t = 0 is out at initialisation
     model.stack.controller.step = lambda *a, **k: Decision(np.array([50.0, 9.0]), ok=False,
                                                            status="QP infeasible")
-    for i in range(1, 10):
+    for i in range(9):
         assert model.step(i * 0.01, 0.01)
-    assert not model.step(0.1, 0.01)
+    assert not model.step(0.09, 0.01)  # the step that ends on t = 0.1 decides for it
     assert "QP infeasible" in model.error and "t = 0.1" in model.error
     assert (model.values["nT"], model.values["nS"], model.values["status"]) == (0.0, 0.0, 3)
-    assert not model.step(0.11, 0.01)  # and it stays in its error state
+    assert not model.step(0.1, 0.01)  # and it stays in its error state
     model.close()
     last = (tmp_path / "nav.csv").read_text().splitlines()[-1]
     assert last.endswith("QP infeasible")
@@ -88,8 +87,9 @@ def test_an_exception_in_the_controller_never_reaches_the_master(short_bend_file
         raise ZeroDivisionError("division by zero")
 
     model.stack.controller.step = boom
-    assert not model.step(0.0, 0.01)
-    assert "ZeroDivisionError: division by zero" in model.error
+    assert all(model.step(i * 0.01, 0.01) for i in range(9))
+    assert not model.step(0.09, 0.01)
+    assert "ZeroDivisionError: division by zero" in model.error and "t = 0.10" in model.error
     assert model.values["status"] == STATUS_CODES["failed"]
     model.close()
 
@@ -106,9 +106,9 @@ def test_a_step_finer_than_the_imu_period_samples_every_imu_instant(short_bend_f
     (tmp_path / "coarse").mkdir()
     fine = _started_model(short_bend_file, tmp_path / "fine")
     coarse = _started_model(short_bend_file, tmp_path / "coarse")
-    for i in range(40):
+    for i in range(39):
         assert fine.step(i * 0.0025, 0.0025)
-    for i in range(10):
+    for i in range(9):
         assert coarse.step(i * 0.01, 0.01)
+    assert fine.stack._imu_k == coarse.stack._imu_k == 9  # both sampled 0.01 ... 0.09
     np.testing.assert_array_equal(fine.stack._nav.state, coarse.stack._nav.state)
-    assert fine.stack._imu_k == coarse.stack._imu_k == 9
