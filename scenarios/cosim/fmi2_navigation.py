@@ -17,10 +17,10 @@ from scenarios.cosim.nav_variables import VARIABLES
 
 _KINDS = {"real": Real, "integer": Integer, "string": String}
 _PINNED: list = []
-"""One reference to the FMU's class and script module per instance: pythonfmu 0.7's
-fmi2FreeInstance drops one reference too many to them, which freed them while still in use
-and made the next instance in the process crash or fail ("module has no attribute
-'CanalnavNavigation'")."""
+"""One reference to each instance, its class and its script module: pythonfmu 0.7's
+fmi2FreeInstance drops one reference too many to them, which freed them while still in use:
+the next instance in the process failed ("module has no attribute 'CanalnavNavigation'") and
+the master crashed in Python's last garbage collection. An instance's memory is kept."""
 
 
 class _UnitReal(Real):
@@ -44,7 +44,7 @@ class NavigationFmi2(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        _PINNED.extend((type(self), sys.modules.get(type(self).__module__)))
+        _PINNED.extend((self, type(self), sys.modules.get(type(self).__module__)))
         self.model = NavigationModel(self.resources)
         meta = describe_model(Path(self.resources or ".") / SCENARIO_RESOURCE)
         self.description = meta.description
