@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import shutil
 import tempfile
+import uuid
 from pathlib import Path
 
 from controller.errors import InputError
@@ -51,8 +52,9 @@ def build_navigation_fmu(scenario_path: str | Path, out: str | Path, fmi_version
     document = scenario_document(scenario_path, overrides)
     out.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="canalnav-nav-fmu-") as tmp:
-        # one module name per FMI version: both FMUs may run in one Python process
-        script = Path(tmp) / f"canalnav_navigation_fmi{fmi_version}.py"
+        # a module name of its own per build: several navigation FMUs (other scenarios, both
+        # FMI versions) may run in one Python process, and a build beside them
+        script = Path(tmp) / f"canalnav_navigation_fmi{fmi_version}_{uuid.uuid4().hex[:12]}.py"
         script.write_text(  # the builders look for the slave class in the script itself
             f'"""canalnav\'s navigation FMU (FMI {fmi_version}.0); its code is in the canalnav '
             f'package."""\nfrom {package} import {base}\nfrom {module} import {wrapper}\n\n\n'

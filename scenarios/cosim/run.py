@@ -90,6 +90,9 @@ def load_system(folder: str | Path) -> System:
             md = read_model_description(str(source))
         except Exception as exc:  # fmpy: a broken zip or model description, in its words
             raise InputError(f"{source}: not an FMU fmpy can read: {exc}") from None
+        if md.fmiVersion != "2.0":
+            raise InputError(f"{source}: FMI {md.fmiVersion}: libcosim runs FMI 2.0 FMUs (write "
+                             f"the system with `canalnav fmu system --fmi 2`)")
         sources[name] = source
         variables[name] = {v.name: v for v in md.modelVariables}
     for want in (BOAT, NAVIGATION):
