@@ -12,6 +12,8 @@ from __future__ import annotations
 import csv
 import json
 import math
+import multiprocessing
+import os
 import time
 import zipfile
 from dataclasses import dataclass, field
@@ -21,7 +23,7 @@ from xml.etree import ElementTree
 
 import numpy as np
 
-from controller.errors import InputError
+from controller.errors import CanalnavError, InputError
 from controller.geometry import Polyline
 from scenarios.cosim.extra import require
 from scenarios.cosim.nav_model import SCENARIO_RESOURCE
@@ -150,17 +152,65 @@ def _round(x, digits: int = 6):
 def run_cosim(folder: str | Path, out_dir: str | Path, duration_s: float | None = None,
               progress: Callable[[float, float], None] | None = None) -> CosimResult:
     """Run the system in `folder` through libcosim into `out_dir` (log.csv, summary.json,
-    timing.json, and the navigation FMU's own log)."""
-    from scenarios.loop.runner import R_B_M, loop_config
-
+    timing.json, and the navigation FMU's own log). The system is checked here; the run is a
+    process of its own, in which the FMUs' Python lives and ends (pythonfmu 0.7's FMI 2.0
+    binary can crash Python's teardown after a long run, README "Known limits")."""
     system = load_system(folder)
-    cosim = require("libcosimpy.CosimExecution", "canalnav cosim")
-    observers = require("libcosimpy.CosimObserver", "canalnav cosim")
+    require("libcosimpy.CosimExecution", "canalnav cosim")
     out = Path(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise InputError(f"--out {out}: cannot make the folder: {exc.strerror or exc}") from None
+    context = multiprocessing.get_context("spawn")
+    receive, send = context.Pipe(duplex=False)
+    worker = context.Process(target=_run_in_worker, args=(str(folder), str(out), duration_s, send),
+                             name="canalnav-cosim", daemon=True)
+    worker.start()
+    send.close()
+    try:
+        while True:
+            try:
+                kind, *payload = receive.recv()
+            except EOFError:
+                worker.join(timeout=10)
+                raise CanalnavError(f"the co-simulation ended without results (its process "
+                                    f"exited with {worker.exitcode})") from None
+            if kind == "progress" and progress is not None:
+                progress(*payload)
+            elif kind == "error":
+                raise payload[0]
+            elif kind == "done":
+                summary, timing, states = payload
+                return CosimResult(summary, timing, out / "log.csv", system.scenario, states)
+    finally:
+        worker.join(timeout=30)
+        if worker.is_alive():
+            worker.kill()
+
+
+def _run_in_worker(folder: str, out_dir: str, duration_s, send) -> None:
+    """The worker's side of `run_cosim`: the run, its progress and its end, down the pipe."""
+    try:
+        result = _run(load_system(folder), Path(out_dir), duration_s,
+                      lambda t, total: send.send(("progress", t, total)))
+        send.send(("done", result.summary, result.timing, result.states))
+    except CanalnavError as exc:
+        send.send(("error", exc))
+    except Exception as exc:  # noqa: BLE001 - said to the caller in one line
+        send.send(("error", CanalnavError(f"the co-simulation failed: {type(exc).__name__}: "
+                                          f"{exc}")))
+    finally:
+        send.close()
+    os._exit(0)  # the results are out: no teardown for pythonfmu's binary to crash in
+
+
+def _run(system: System, out: Path, duration_s, progress) -> CosimResult:
+    """The run itself: libcosim steps the two FMUs; this reads, scores and logs each period."""
+    from scenarios.loop.runner import R_B_M, loop_config
+
+    cosim = require("libcosimpy.CosimExecution", "canalnav cosim")
+    observers = require("libcosimpy.CosimObserver", "canalnav cosim")
     scenario = system.scenario
     cfg = loop_config(scenario, scenario.seed)
     duration = scenario.duration_s if duration_s is None else float(duration_s)
