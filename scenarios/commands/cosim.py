@@ -105,6 +105,9 @@ def run_cosim_command(args) -> int:
     print(json.dumps(result.summary, indent=2))
     t = result.timing
     print(f"wall time {t['wall_time_s']:.1f} s, {t['real_time_factor']:.2f}x real time")
+    if result.scenario.criteria.min_first_detected_m is not None:
+        print("note: criterion min_first_detected_m is not scored here (the segments stay "
+              "inside the navigation FMU); `canalnav run` scores it")
     failed = check_criteria(result.scenario, result.summary)
     for f in failed:
         print(f"criterion failed: {f}")

@@ -31,6 +31,7 @@ from scenarios.cosim.nav_variables import COMMAND_OUTPUTS, VARIABLES as NAV_VARI
 from scenarios.cosim.navigation import STATUS_CODES
 from scenarios.cosim.system import BOAT, NAVIGATION, OSP_FILE, check_step
 from scenarios.results import metrics
+from scenarios.results.encounters import EncounterWatch
 
 OSP = "{http://opensimulationplatform.com/MSMI/OSPSystemStructure}"
 BOAT_OUTPUTS = ("x", "y", "psi", "u", "v", "r", "nT_actual", "nS_actual")
@@ -40,6 +41,10 @@ LOG_COLUMNS = ("time_s", "true_x_m", "true_y_m", "true_psi_rad", "true_u_mps", "
                "clearance_bow_m", "clearance_stern_m", "cross_track_m", "canal_width_m",
                "canal_width_min_hull_m", "centre_offset_m", "slack_m", "status")
 NAV_LOG = "navigation_log.csv"
+NOT_SCORED = ["obstacles (first detected: the segments stay inside the navigation FMU)",
+              "tracking", "water", "elastic", "time_blind_s", "missing_scans",
+              "segments_cleaned"]
+"""What `canalnav run`'s summary has that a master seeing only the FMUs' outputs cannot score."""
 
 
 @dataclass(frozen=True)
@@ -230,6 +235,7 @@ def _run(system: System, out: Path, duration_s, progress) -> CosimResult:
     n_steps = int(math.floor(duration / cfg.control_period_s + 1e-9))
     path, goal = Polyline(cfg.waypoints), np.asarray(cfg.waypoints, float)[-1]
     world = _World(cfg)
+    encounters = EncounterWatch(cfg.vessels)
     boat_vr = [refs[BOAT][n] for n in BOAT_OUTPUTS]
     nav_vr = [refs[NAVIGATION][n] for n in NAV_OUTPUTS]
     status_vr = [refs[NAVIGATION]["status"]]
@@ -259,6 +265,10 @@ def _run(system: System, out: Path, duration_s, progress) -> CosimResult:
             clear = clearance.of(state)
             xt = path.cross_track(state[:2])
             width = width_of.at(state)
+            if cfg.vessels:  # other vessels count for clearance where they are now
+                rings = [np.vstack([h, h[:1]]) for h in (v.outline_at(t) for v in cfg.vessels)]
+                clear = np.minimum(clear, metrics.clearance(state[None, :3], rings)[0])
+            vessel_gap = encounters.update(t, state, width[2])
             log.writerow([f"{t:.3f}", *(repr(float(v)) for v in state),
                           *(repr(float(v)) for v in (*nav[:2], *actuators, *clear, xt, *width,
                                                      nav[2])), code])
@@ -277,6 +287,10 @@ def _run(system: System, out: Path, duration_s, progress) -> CosimResult:
                 break
             if min(clear) <= contact.reach_m and contact.touches(state):
                 status, collided = f"collision at t = {t:.1f} s", True
+                break
+            if vessel_gap <= 0.0:
+                hit = cfg.vessels[int(np.argmin(encounters.min_distance))].name
+                status, collided = f"collision with vessel {hit!r} at t = {t:.1f} s", True
                 break
             if per_period > 1 and not advance(per_period - 1):
                 status = f"controller failed: {_failure_reason(out / NAV_LOG)}"
@@ -321,8 +335,10 @@ def _run(system: System, out: Path, duration_s, progress) -> CosimResult:
                                            R_B_M + scenario.d_p_m, dt)
     summary["narrow_below_m"] = 2 * (R_B_M + scenario.d_p_m)
     summary.update({k: _round(v) for k, v in by_place.items()})
+    if cfg.vessels:
+        summary["vessels"] = encounters.summary(dt)
     summary["cosim"] = {"master": "libcosim (libcosimpy)", "step_s": system.step_s,
-                        "system": str(system.osp)}
+                        "system": str(system.osp), "not_scored": NOT_SCORED}
     timing = {"wall_time_s": wall,
               "real_time_factor": duration_run / wall if wall > 0 else None,
               "steps": len(rows_t) * per_period}
