@@ -27,7 +27,6 @@ from controller.errors import CanalnavError, InputError
 from controller.geometry import Polyline
 from scenarios.cosim.extra import require
 from scenarios.cosim.nav_model import SCENARIO_RESOURCE
-from scenarios.cosim.nav_variables import COMMAND_OUTPUTS, VARIABLES as NAV_VARIABLES
 from scenarios.cosim.navigation import STATUS_CODES
 from scenarios.cosim.system import BOAT, NAVIGATION, OSP_FILE, check_step
 from scenarios.results import metrics
@@ -257,7 +256,7 @@ def _run(system: System, out: Path, duration_s, progress) -> CosimResult:
         log.writerow(LOG_COLUMNS)
         for k in range(n_steps):
             t = k * cfg.control_period_s
-            ok = advance(1)  # the navigation decides at t, in the step that starts there
+            ok = advance(1)  # (the navigation's decision for t came out with the step to t)
             nav = np.array(watch.last_real_values(index[NAVIGATION], nav_vr), float)
             code = int(watch.last_integer_values(index[NAVIGATION], status_vr)[0])
             state, actuators = now[:6], now[6:8]

@@ -1,5 +1,6 @@
-"""The issue's must-show: `canalnav cosim` on the Pohang canal with known walls reaches the
-goal with the file's criteria, its trajectory within 0.05 m of `canalnav run` at every step."""
+"""The issue's must-show: `canalnav cosim` on the Pohang canal and on a vessel scenario with
+known walls, and on a canal with the LiDAR inside the navigation FMU, reaches the goal with
+the file's criteria, its trajectory within 0.05 m of `canalnav run` at every step."""
 
 import json
 import subprocess
@@ -22,14 +23,19 @@ def _xy(log_path):
 
 
 @pytest.mark.slow
-def test_cosim_on_pohang_reaches_the_goal_on_the_trajectory_of_canalnav_run(tmp_path, capsys):
-    scenario = str(ROOT / "scenarios" / "pohang.toml")
-    assert main(["fmu", "system", scenario, "-o", str(tmp_path / "system"), *KNOWN_WALLS]) == 0
+@pytest.mark.parametrize("name, overrides", [("pohang", KNOWN_WALLS),
+                                             ("vessel_meeting", KNOWN_WALLS),
+                                             ("narrow", [])],  # the LiDAR in the FMU
+                         ids=["pohang-known-walls", "vessel-meeting-known-walls", "narrow-lidar"])
+def test_cosim_reaches_the_goal_on_the_trajectory_of_canalnav_run(tmp_path, capsys, name,
+                                                                  overrides):
+    scenario = str(ROOT / "scenarios" / f"{name}.toml")
+    assert main(["fmu", "system", scenario, "-o", str(tmp_path / "system"), *overrides]) == 0
     done = subprocess.run([str(CANALNAV), "cosim", str(tmp_path / "system"), "--out",
                            str(tmp_path / "cosim")], capture_output=True, text=True,
                           timeout=1800)
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-2000:]  # goal + criteria
-    assert main(["run", scenario, *KNOWN_WALLS, "--out", str(tmp_path / "run"), "--no-plots",
+    assert main(["run", scenario, *overrides, "--out", str(tmp_path / "run"), "--no-plots",
                  "--no-mcap"]) == 0
     capsys.readouterr()
     cosim = json.loads((tmp_path / "cosim" / "summary.json").read_text())
