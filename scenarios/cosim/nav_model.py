@@ -61,8 +61,8 @@ class NavigationModel:
             if self.values["perception"]:
                 scenario = replace(scenario, perception=self.values["perception"])
                 if scenario.perception not in ("known-walls", "lidar"):
-                    return (f"parameter perception: {scenario.perception!r} is not one of "
-                            f"known-walls, lidar")
+                    return self._fail(f"parameter perception: {scenario.perception!r} is not "
+                                      f"one of known-walls, lidar")
             seed = int(self.values["seed"])
             self.stack = NavigationStack(scenario, self.values["controller"] or None,
                                          None if seed < 0 else seed)

@@ -112,3 +112,34 @@ def test_a_step_finer_than_the_imu_period_samples_every_imu_instant(short_bend_f
         assert coarse.step(i * 0.01, 0.01)
     assert fine.stack._imu_k == coarse.stack._imu_k == 9  # both sampled 0.01 ... 0.09
     np.testing.assert_array_equal(fine.stack._nav.state, coarse.stack._nav.state)
+
+
+def test_the_perception_parameter_puts_the_simulated_lidar_inside(short_bend_file, tmp_path):
+    import json
+
+    from scenarios.cosim.build import scenario_document
+
+    (tmp_path / "scenario.json").write_text(json.dumps(scenario_document(short_bend_file)))
+    model = NavigationModel(tmp_path)
+    model.values["perception"] = "lidar"
+    model.values["log_path"] = str(tmp_path / "nav.csv")
+    assert model.start() is None
+    assert type(model.stack.perception).__name__ == "DelayedLidarPerception"
+    assert all(model.step(i * 0.01, 0.01) for i in range(30))
+    rows = (tmp_path / "nav.csv").read_text().splitlines()[1:]
+    segments = [int(r.split(",")[13]) for r in rows]
+    assert len(rows) == 4 and min(segments) > 0  # decisions at 0.0 ... 0.3 s, walls seen
+    model.close()
+
+
+def test_an_unknown_perception_parameter_is_refused_by_name(short_bend_file, tmp_path):
+    import json
+
+    from scenarios.cosim.build import scenario_document
+
+    (tmp_path / "scenario.json").write_text(json.dumps(scenario_document(short_bend_file)))
+    model = NavigationModel(tmp_path)
+    model.values["perception"] = "radar"
+    reason = model.start()
+    assert reason is not None and "perception" in reason and "'radar'" in reason
+    assert model.error == reason and not model.step(0.0, 0.01)
