@@ -14,6 +14,7 @@ def register(sub) -> None:
         "plus a small FMI wrapper, compiled with gcc, sources included), or check one.",
     )
     actions = p.add_subparsers(dest="action", metavar="ACTION", required=True)
+    p.canalnav_actions = actions  # for packages above fmu to add theirs (`fmu_actions`)
 
     b = actions.add_parser(
         "build", help="build boat.fmu for this platform (binary + sources)",
@@ -41,6 +42,12 @@ def register(sub) -> None:
     c.add_argument("--step", type=float, action="append", default=None,
                    help="communication step(s) in s for --compare (default 0.1 and 1.0)")
     c.set_defaults(func=run_check)
+
+
+def fmu_actions(sub):
+    """The `fmu` command's ACTION subparsers, for a package above fmu to add FMU actions that
+    need what fmu may not import (scenarios: build-controller and system read scenarios)."""
+    return sub.choices["fmu"].canalnav_actions
 
 
 def run_build(args) -> int:
