@@ -31,6 +31,25 @@ class NoiseSpec:
     vel_tau_s: float = 1.0
     rate_sigma_radps: float = math.radians(0.2)
     rate_tau_s: float = 0.2
+    # A heading bias, as a real EKF's from a badly calibrated compass or a magnetic
+    # disturbance: constant, plus a slow wander (Gauss-Markov, drawn from its own stream so
+    # that the other errors of a seed stay the same). The velocity over ground stays the
+    # GPS's (NED); the body-frame velocity the bridge derives with the biased heading then
+    # shows a sideslip the boat does not have, as ArduPilot's does.
+    heading_bias_rad: float = 0.0
+    heading_wander_sigma_rad: float = 0.0
+    heading_wander_tau_s: float = 300.0
+
+    def __post_init__(self) -> None:
+        for name in ("pos_sigma_m", "pos_tau_s", "heading_sigma_rad", "heading_tau_s",
+                     "vel_sigma_mps", "vel_tau_s", "rate_sigma_radps", "rate_tau_s",
+                     "heading_bias_rad", "heading_wander_sigma_rad", "heading_wander_tau_s"):
+            value = getattr(self, name)
+            if not math.isfinite(value) or (value < 0 and name != "heading_bias_rad") \
+                    or (name.endswith("tau_s") and value <= 0):
+                raise ValueError(f"EKF noise {name} must be a finite number"
+                                 f"{'' if name == 'heading_bias_rad' else ' >= 0'}"
+                                 f"{' > 0' if name.endswith('tau_s') else ''}, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -60,6 +79,12 @@ class EkfModel:
         self._err = np.clip(self._rng.standard_normal(6), -3, 3) * self._sigma
         self._dt = None
         self._a = self._b = None
+        self._wander = 0.0
+        self._wander_rng = None
+        if spec.heading_wander_sigma_rad > 0:
+            self._wander_rng = np.random.default_rng([seed, 1])
+            self._wander = float(np.clip(self._wander_rng.standard_normal(), -3, 3)
+                                 * spec.heading_wander_sigma_rad)
 
     def step(self, dt: float) -> None:
         """Advance every error by `dt` seconds (exact discretisation of the Gauss-Markov law)."""
@@ -69,6 +94,18 @@ class EkfModel:
             self._b = self._sigma * np.sqrt(1.0 - self._a ** 2)
         e = self._a * self._err + self._b * self._rng.standard_normal(6)
         self._err = np.clip(e, -3 * self._sigma, 3 * self._sigma)
+        if self._wander_rng is not None:
+            s = self.spec
+            a = math.exp(-dt / s.heading_wander_tau_s)
+            w = a * self._wander + s.heading_wander_sigma_rad * math.sqrt(1.0 - a * a) \
+                * self._wander_rng.standard_normal()
+            self._wander = min(max(w, -3 * s.heading_wander_sigma_rad),
+                               3 * s.heading_wander_sigma_rad)
+
+    @property
+    def heading_bias_rad(self) -> float:
+        """The heading error's bias part now: the constant bias and the wander."""
+        return self.spec.heading_bias_rad + self._wander
 
     def ready(self, since_boot_s: float) -> bool:
         return since_boot_s >= self.delay_s
@@ -81,5 +118,5 @@ class EkfModel:
         return Estimate(
             north_m=x + e[0], east_m=y + e[1],
             vn_mps=c * u - s * v + e[3], ve_mps=s * u + c * v + e[4],
-            psi_rad=float(wrap_angle(psi + e[2])), r_radps=r + e[5],
+            psi_rad=float(wrap_angle(psi + e[2] + self.heading_bias_rad)), r_radps=r + e[5],
         )

@@ -425,7 +425,8 @@ class OnboardLoop:
                     (pwm.get(m.throttle.channel), pwm.get(m.steering.channel)), segs,
                     nearest_segment_m(pred, segs), solve_ms, float(decision.slack_m),
                     hb.mode, hb.armed, str(decision.status), view=view,
-                    water=decision.stats.get("water"), cloud=cloud, plan=decision.predicted)
+                    water=decision.stats.get("water"), cloud=cloud, plan=decision.predicted,
+                    current_used=decision.stats.get("current_used"))
         self.log.step(step)
         self.steps += 1
         self._show(step)

@@ -26,7 +26,8 @@ STEP_COLUMNS = (
     + ("nT_cmd_pct", "nS_cmd_pct", "throttle_pwm_us", "steering_pwm_us", "segments",
        "nearest_segment_m", "scan_age_s", "blind", "tracks", "segments_cleaned",
        "current_n_mps", "current_e_mps", "bias_u_mps2", "bias_v_mps2", "bias_r_radps2",
-       "solve_ms", "slack_m", "mode", "armed", "status")
+       "current_used_n_mps", "current_used_e_mps", "solve_ms", "slack_m", "mode", "armed",
+       "status")
 )
 SEGMENT_COLUMNS = ("time_s", "x_c_m", "y_c_m", "theta_rad", "length_m")
 
@@ -54,6 +55,7 @@ class Step:
     water: object = None  # controller.water_estimator.WaterEstimate of this step
     cloud: object = None  # the LiDAR cloud of this step (N, 3) body frame, for the viewer
     plan: object = None  # the controller's predicted horizon (K, >=3), for the viewer
+    current_used: object = None  # (2,) the current the controller was given (NED, m/s)
 
 
 BRIDGE_FIGURES = (
@@ -166,6 +168,7 @@ class StepLog:
             row += [""] * 5
         else:
             row += [_num(v) for v in (*s.water.current_ne, *s.water.bias)]
+        row += ["", ""] if s.current_used is None else [_num(v) for v in s.current_used]
         row += [f"{s.solve_ms:.3f}", _num(s.slack_m), s.mode, int(s.armed), s.status]
         self._w.writerow(row)
         for seg in np.asarray(s.segments, float).reshape(-1, 4):

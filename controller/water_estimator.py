@@ -58,9 +58,14 @@ class WaterEstimatorConfig:
 
     window_s: float = 1.0  # each update predicts the motion over this long
     period_s: float = 0.1  # how often `update` is called (the control period)
-    velocity_sigma: tuple[float, float, float] = (0.02, 0.02, 0.004)  # of [u, v, r] at a
-    # window's end given its start: the navigation filter's noise and the model's own
-    # error over a window (m/s, m/s, rad/s)
+    # The noise of [u, v, r] at a window's end given its start (the navigation's own and
+    # the model's error over a window; m/s, m/s, rad/s), learnt from the innovations
+    # (`noise_learning`: each window's weight), from `velocity_sigma` (also its cap: an
+    # autopilot's EKF, velocity noise ~0.05 m/s correlated over a second) down to
+    # `velocity_sigma_floor` as a quieter source shows itself (a navigation filter's own).
+    velocity_sigma: tuple[float, float, float] = (0.07, 0.07, 0.005)
+    velocity_sigma_floor: tuple[float, float, float] = (0.01, 0.01, 0.002)
+    noise_learning: float = 0.1
     current_walk: float = 0.004  # m/s per sqrt(s): how fast the current along the boat may
     # change (slowly: it is read from the surge, where a model error looks the same) ...
     current_walk_across: float = 0.03  # ... and across it (sway sees it at once, so the
@@ -77,23 +82,34 @@ class WaterEstimatorConfig:
     steady_dr_radps: float = 0.02  # ... or the yaw rate more than this are not used: there
     # the model's mass and inertia errors (which neither a current nor a constant bias can
     # stand for) outweigh what the window says about the water
+    steady_dnT_pct: float = 3.0  # a window in which the throttle moves more than this says
+    # nothing through its surge: while it ramps (a start, a stop), the thrust's lag behind
+    # the command (the link, the autopilot's whole percents, the actuator's own rate) reads
+    # as a current of tenths of a metre a second along the boat; its sway and yaw still count
     boat: BoatParams = field(default=IDENTIFIED)
 
     def __post_init__(self) -> None:
         for name in ("window_s", "period_s", "current_walk", "current_walk_across",
                      "current_sigma0", "gate_sigma",
-                     "max_jump_m", "steady_du_mps", "steady_dr_radps"):
+                     "max_jump_m", "steady_du_mps", "steady_dr_radps", "steady_dnT_pct",
+                     "noise_learning"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
                     or v <= 0:
                 raise InputError(f"water estimator: {name} must be a positive number, got {v!r}")
-        for name in ("velocity_sigma", "bias_walk", "bias_sigma0"):
+        for name in ("velocity_sigma", "velocity_sigma_floor", "bias_walk", "bias_sigma0"):
             v = getattr(self, name)
             if len(v) != 3 or not all(isinstance(x, (int, float)) and math.isfinite(x) and x >= 0
                                       for x in v):
                 raise InputError(f"water estimator: {name} needs three numbers >= 0, got {v!r}")
-        if min(self.velocity_sigma) <= 0:
-            raise InputError("water estimator: velocity_sigma must be positive")
+        if min(self.velocity_sigma) <= 0 or min(self.velocity_sigma_floor) <= 0:
+            raise InputError("water estimator: velocity_sigma and its floor must be positive")
+        if any(f > v for f, v in zip(self.velocity_sigma_floor, self.velocity_sigma)):
+            raise InputError("water estimator: velocity_sigma_floor must not exceed "
+                             "velocity_sigma")
+        if self.noise_learning > 1:
+            raise InputError(f"water estimator: noise_learning must be in (0, 1], got "
+                             f"{self.noise_learning!r}")
         if self.window_s < self.period_s:
             raise InputError("water estimator: window_s must be at least period_s")
 
@@ -114,6 +130,33 @@ class WaterEstimate:
     updates: int  # windows used so far
     skipped: int  # windows skipped (non-finite, jumped, gated)
     reopened: int = 0  # times the water changed faster than the filter's random walk
+    current_cov: np.ndarray | None = None  # (2, 2) the current's covariance (NED)
+
+
+def usable_current(estimate: WaterEstimate, heading_rad: float, prior_sigma: float,
+                   along_sigma: float = 0.1) -> np.ndarray:
+    """The current to hand the controller: the estimate along and across the boat, each
+    part weighted by the evidence behind it.
+
+    Across the boat (what keeps the boat on its line, and what a heading bias of the
+    autopilot's EKF looks like), sway sees a current at once: the part is weighted by the
+    share of the prior's spread the data have explained, w = 1 - (sigma / prior_sigma)^2,
+    near 0 before the first windows and near 1 once known, so it is used in full in
+    steady running and no offset is left. Along the boat a current looks like a drag
+    error and a second's window tells little (sigma ~0.2 m/s after ten windows of an
+    autopilot's EKF): handed over early, the navigation's noise steered the boat as a head
+    current of 0.3 m/s; so that part counts only as it becomes known to `along_sigma`,
+    w = 1 - (sigma / along_sigma)^2. What is not handed over there only changes the speed,
+    which the NMPC's feedback holds."""
+    cov = estimate.current_cov
+    if cov is None:
+        return np.asarray(estimate.current_ne, float)
+    c, s = math.cos(heading_rad), math.sin(heading_rad)
+    rot = np.array([[c, s], [-s, c]])  # NED -> (along, across)
+    body = rot @ np.asarray(estimate.current_ne, float)
+    var = np.einsum("ij,jk,ik->i", rot, cov, rot)
+    weight = np.clip(1.0 - var / np.array([along_sigma, prior_sigma]) ** 2, 0.0, 1.0)
+    return rot.T @ (weight * body)
 
 
 def window_prediction(steps: int, dt: float) -> ca.Function:
@@ -151,6 +194,7 @@ class WaterEstimator:
         ekf.Q = c.window_s * np.diag([c.current_walk**2] * 2 + [s * s for s in c.bias_walk])
         ekf.R = np.diag([s * s for s in c.velocity_sigma])
         self._ekf = ekf
+        self._noise = np.array([s * s for s in c.velocity_sigma])  # running estimate of R
         self._buffer: deque = deque(maxlen=c.steps + 1)
         self.updates = 0
         self.skipped = 0
@@ -163,7 +207,7 @@ class WaterEstimator:
         x, P = self._ekf.x, self._ekf.P
         sigma = np.sqrt(np.maximum(np.diag(P), 0.0))
         return WaterEstimate(x[0:2].copy(), x[2:5].copy(), sigma[0:2], sigma[2:5],
-                             self.updates, self.skipped, self.reopened)
+                             self.updates, self.skipped, self.reopened, P[:2, :2].copy())
 
     def update(self, state, actuators) -> WaterEstimate:
         """Add this period's state estimate [x, y, psi, u, v, r] and actuator positions
@@ -203,17 +247,38 @@ class WaterEstimator:
         nu, jac = self._predict(states[0], held.T, ekf.x, self._p)
         nu, H = np.asarray(nu).ravel(), np.asarray(jac)
         y = states[-1, 3:6] - nu
+        ramp = abs(acts[-1, 0] - acts[0, 0]) > c.steady_dnT_pct
+        learnt = ekf.R.copy()
+        if ramp:  # the surge of this window is the throttle's lag, not the water
+            ekf.R[0, 0] = 1e4
         S = H @ ekf.P @ H.T + ekf.R
         if float(y @ np.linalg.solve(S, y)) > c.gate_sigma**2:
             self._gated_in_row += 1
             if self._gated_in_row < c.reopen_after:
                 self.skipped += 1
+                ekf.R = learnt
                 return
             self._reopen()
         # theta enters nu nonlinearly; one EKF step linearised at the prior mean
+        prior = ekf.x.copy()
         ekf.update(states[-1, 3:6], lambda _x: H, lambda _x: nu)
+        ekf.R = learnt
         self.updates += 1
         self._gated_in_row = 0
+        if not ramp:
+            residual = y - H @ (ekf.x - prior)
+            self._learn_noise(residual, np.einsum("ij,jk,ik->i", H, ekf.P, H))
+
+    def _learn_noise(self, residual: np.ndarray, explained: np.ndarray) -> None:
+        """The measurement noise from the residuals after each update (Mehra's residual
+        form of covariance matching, which stays positive while the filter still learns):
+        R = E[residual^2] + H P H', between the floor and the start value."""
+        c = self.config
+        sample = residual**2 + explained
+        self._noise += c.noise_learning * (sample - self._noise)
+        lo = np.square(c.velocity_sigma_floor)
+        hi = np.square(c.velocity_sigma)
+        self._ekf.R = np.diag(np.clip(self._noise, lo, hi))
 
     def _set_walk(self, heading_rad: float) -> None:
         """The current's random walk over one window, along and across the boat's heading."""

@@ -45,11 +45,35 @@ def register(sub) -> None:
                    help="use the parameter names of ArduPilot 4.5 (SYSID_MYGCS, ARMING_CHECK)")
     p.add_argument("--system-id", type=int, default=1, metavar="N",
                    help="the autopilot's MAVLink system id (default 1)")
+    p.add_argument("--heading-bias", type=float, default=0.0, metavar="DEG",
+                   help="a constant bias of the EKF's heading, degrees (a badly calibrated "
+                   "compass); the velocity over ground stays the GPS's")
+    p.add_argument("--heading-wander", type=float, default=0.0, metavar="DEG",
+                   help="and a slow seeded wander of it (standard deviation, degrees; time "
+                   "constant 300 s)")
     p.add_argument("--clock-fault", action="append", default=[], metavar="AT:STEP",
                    help="the autopilot's clock stalls at AT seconds after start for STEP "
                    "seconds and stays that far behind (a negative STEP: it jumps ahead), as "
                    "SITL's under load; repeatable, e.g. --clock-fault 60:0.6")
     p.set_defaults(func=run)
+
+
+def _ekf_noise(args):
+    """The EKF's errors with the heading bias asked for (None: the defaults)."""
+    import math
+
+    from controller.errors import InputError
+
+    from bridge.autopilot_ekf import NoiseSpec
+
+    if not (math.isfinite(args.heading_bias) and math.isfinite(args.heading_wander)
+            and args.heading_wander >= 0):
+        raise InputError(f"--heading-bias {args.heading_bias} / --heading-wander "
+                         f"{args.heading_wander}: finite degrees needed, the wander >= 0")
+    if not args.heading_bias and not args.heading_wander:
+        return None
+    return NoiseSpec(heading_bias_rad=math.radians(args.heading_bias),
+                     heading_wander_sigma_rad=math.radians(args.heading_wander))
 
 
 def parse_clock_faults(items: list[str]) -> list[tuple[float, float]]:
@@ -108,7 +132,8 @@ def run(args) -> int:
     sim = AutopilotSim(scenario, args.listen, clock, seed=seed, signing_key=key, params=params,
                        ekf_delay_s=args.ekf_delay, legacy_param_names=args.legacy_param_names,
                        system_id=args.system_id, init_s=args.init_delay, log_dir=args.log,
-                       clock_faults=parse_clock_faults(args.clock_fault))
+                       clock_faults=parse_clock_faults(args.clock_fault),
+                       ekf_noise=_ekf_noise(args))
 
     def terminate(signum, frame):
         raise KeyboardInterrupt

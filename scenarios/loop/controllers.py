@@ -74,12 +74,15 @@ class NmpcController:
 
     def step(self, time_s, state, actuators, segments, blind=False, vessels=()) -> Decision:
         from controller.errors import SolverError
+        from controller.water_estimator import usable_current
 
         t0 = time.perf_counter()
         water = self.estimator.update(state, actuators)
         estimator_s = time.perf_counter() - t0
-        if self.water == "estimated":
-            current, bias = water.current_ne, water.bias
+        if self.water == "estimated":  # each part of the current as far as it is known
+            current = usable_current(water, float(np.asarray(state, float)[2]),
+                                     self.estimator.config.current_sigma0)
+            bias = water.bias
         elif self.water == "true":
             current, bias = self._field.at(np.asarray(state)[:2]), (0.0, 0.0, 0.0)
         else:
@@ -98,6 +101,7 @@ class NmpcController:
             stats={"qp_iterations": st.stats.qp_iterations, "fallback": st.stats.fallback,
                    "segments_dropped": st.stats.segments_dropped, "waiting": st.stats.waiting,
                    "water": water, "estimator_s": estimator_s, "rules": st.stats.rules,
+                   "current_used": np.asarray(current, float),
                    "feedback_s": st.stats.time_feedback_s,
                    "preparation_s": st.stats.time_preparation_s,
                    "nmpc_step_s": st.stats.time_total_s, "fed_back": st.stats.fed_back,
