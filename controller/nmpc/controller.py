@@ -231,7 +231,8 @@ class NmpcController:
         self._slack_ref_at = self.ocp.states_at[1:, NX - 1]
         self._top_speed = top_speed_mps(config.boat, config.nT_max)
         self._way = WayAhead(config.min_passage_m, config.stop_short_m, config.stop_decel_mps2,
-                             config.resume_after_s)
+                             config.resume_after_s,
+                             clearance_m=config.hull_radius_m + config.separation_m)
         self.compiled_info = None
         if method == "ipopt":
             from .ipopt import IpoptSolver
@@ -269,7 +270,7 @@ class NmpcController:
         self._plan: np.ndarray | None = None
         self._solved = False  # a plan came from a successful solve since the reset
         self.last_qp_inputs: tuple | None = None
-        self._progress_m = 0.0
+        self._progress_m: float | None = None  # None: not yet located on the path
         self._path: WaypointPath | None = None
         self._waypoints_given: np.ndarray | None = None
         self.consecutive_failures = 0
@@ -476,6 +477,9 @@ class NmpcController:
         search, way ahead, rules, slots)."""
         c = self.config
         segs, vessels, speed = inputs.segs, inputs.vessels, inputs.speed
+        if self._progress_m is None:  # a new path: where the boat is along all of it (a
+            # forward search from 0 put a boat that starts 60 m along at 50 m, 10 m off)
+            self._progress_m = self._path.project(x[:2])[0]
         s, d = self._path.frame(x[None, :2], self._progress_m,
                                 self._progress_m + self.search_ahead_m)  # the boat on the path
         stop = self._stop(float(s[0]), float(d[0]), x, segs, elapsed, inputs.blind)
@@ -484,10 +488,10 @@ class NmpcController:
         if rules.stop_at_m is not None:
             stop_at = rules.stop_at_m if stop_at is None else min(stop_at, rules.stop_at_m)
         ref_speed = speed if rules.speed_mps is None else min(speed, rules.speed_mps)
+        offset = self._line(rules.offset_m)
         reference = reference_trajectory(self._path, x[:2], x[2], ref_speed, c.horizon,
                                          c.step_s, self._progress_m, self.search_ahead_m,
-                                         stop_at, c.stop_decel_mps2, inputs.current,
-                                         rules.offset_m)
+                                         stop_at, c.stop_decel_mps2, inputs.current, offset)
         planned = reference.states[:, :2] if guess is None else guess[self._xy_at]
         selection = select_checked(segs, x[:2], c.segment_slots, c.segment_range_m, planned)
         slots = self._keep_slots(selection.slots)
@@ -498,7 +502,7 @@ class NmpcController:
         p[lay.current] = inputs.current
         p[lay.bias] = inputs.bias
         p[lay.segments] = slots.reshape(-1)
-        slack_ref = self._slack_reference(reference, speed, guess, x[:2], slots)
+        slack_ref = self._slack_reference(reference, speed, guess, x[:2], slots, offset)
         w_ref = buffers.w_ref
         w_ref[self._ref_at] = reference.states
         w_ref[self._slack_ref_at] = slack_ref
@@ -562,7 +566,7 @@ class NmpcController:
             return
         self._path = waypoint_path(waypoints)
         self._waypoints_given = given
-        self._progress_m = 0.0
+        self._progress_m = None  # located at the next step
 
     def _solve(self, w, p, w_ref, lbw, ubw) -> SqpResult:
         if self.method == "ipopt":
@@ -691,8 +695,23 @@ class NmpcController:
         w[NX_BOAT] = 0.0
         return w
 
+    def _line(self, rules_offset_m: float):
+        """The line the reference follows across the path: where the way ahead lies off the
+        path (`WayAhead.channel`: a gap beside an obstruction), into it, faded in and out
+        over `channel_ramp_m`; elsewhere the rules' offset."""
+        channel = self._way.channel
+        if not channel:
+            return rules_offset_m
+        ramp = self.config.channel_ramp_m
+
+        def line(s):
+            d = channel.at(s, ramp)
+            return np.where(d != 0.0, d, rules_offset_m)
+
+        return line
+
     def _slack_reference(self, reference: Reference, speed_mps: float, guess, position,
-                         slots: np.ndarray) -> np.ndarray:
+                         slots: np.ndarray, offset=None) -> np.ndarray:
         """s_1..s_Np's reference: the clearance the canal forces each stage to give up
         (`slack_reference`), over the path between the stage's reference point and its place in
         the warm start, widened by the hull circles' offsets and half a stage's travel."""
@@ -709,7 +728,8 @@ class NmpcController:
         widen = self._widen_m + 0.5 * step_m
         segments = slots[slots[:, -1] > 0, :4]
         return forced_slack(self._path, lo - widen, hi + widen, segments,
-                            c.hull_radius_m + c.separation_m, c.slack_min_m)
+                            c.hull_radius_m + c.separation_m, c.slack_min_m,
+                            offset=offset if callable(offset) else None)
 
     def _safe_guess(self, x_init: np.ndarray, reference: Reference,
                     slack_ref: np.ndarray | None = None) -> np.ndarray:

@@ -48,21 +48,66 @@ def waiting_kind(reason: str) -> str:
     return reason.split(" at ")[0].split(":")[0]
 
 
+@dataclass(frozen=True)
+class Channel:
+    """Where the way open ahead lies off the path: from arc length `start_m[k]` for `slab_m`,
+    the boat's line must be `offset_m[k]` across the path (+ to starboard) to pass with the
+    room it needs; elsewhere the path itself is open."""
+
+    start_m: np.ndarray
+    offset_m: np.ndarray
+    slab_m: float = 1.0
+
+    def __bool__(self) -> bool:
+        return bool(len(self.start_m))
+
+    def at(self, s, ramp_m: float) -> np.ndarray:
+        """The offset (n,) at arc lengths s: each slab's, faded out linearly over `ramp_m`
+        before and after it (so the boat moves over before the gap, and back after), the
+        largest in size where two overlap."""
+        s = np.atleast_1d(np.asarray(s, float))
+        if not self:
+            return np.zeros(len(s))
+        lo, hi = self.start_m, self.start_m + self.slab_m
+        gap = np.maximum(np.maximum(lo[None, :] - s[:, None], s[:, None] - hi[None, :]), 0.0)
+        weight = np.clip(1.0 - gap / ramp_m, 0.0, 1.0)
+        values = weight * self.offset_m[None, :]
+        pick = np.argmax(np.abs(values), axis=1)
+        return values[np.arange(len(s)), pick]
+
+
+NO_CHANNEL = Channel(np.zeros(0), np.zeros(0))
+
+
 def blocked_at(path: WaypointPath, progress_m: float, offset_m: float, segments,
                min_passage_m: float, lookahead_m: float, lateral_m: float = 30.0,
                slab_m: float = 1.0, spacing_m: float = 0.5) -> float | None:
     """Arc length of the first slab ahead of `progress_m` (within `lookahead_m`) where the
     segments leave no passage at least `min_passage_m` wide that connects back to the boat
     (at `offset_m` across the path), or None when the way is open."""
+    return sweep(path, progress_m, offset_m, segments, min_passage_m, lookahead_m, lateral_m,
+                 slab_m, spacing_m)[0]
+
+
+def sweep(path: WaypointPath, progress_m: float, offset_m: float, segments,
+          min_passage_m: float, lookahead_m: float, lateral_m: float = 30.0,
+          slab_m: float = 1.0, spacing_m: float = 0.5, clearance_m: float | None = None):
+    """`blocked_at`, and the `Channel` the boat must take where the passage it reaches lies
+    off the path: in each slab before the blockage (or all of them), where the path's line
+    does not have half a passage of room either side within the interval the boat reaches,
+    the line is moved into that interval, `clearance_m` (default half the passage: the hull
+    circle touching) from its sides where the interval is wide enough, else to its middle.
+    The OCP keeps the hull circles as far out (`NmpcConfig.min_half_axis_m`), so what the
+    sweep calls open the plan can pass, and at its speed."""
     segs = np.asarray(segments, float).reshape(-1, 4)
     s_end = min(progress_m + lookahead_m, path.length)
     if not len(segs) or s_end <= progress_m:
-        return None
+        return None, NO_CHANNEL
     # Only the parts near the way ahead: within reach of the path points from here to s_end.
     centre, _ = path.at(0.5 * (progress_m + s_end))
     a, b, length = _inside_circle(segs, centre[0], 0.5 * (s_end - progress_m) + lateral_m)
     if not len(a):
-        return None
+        return None, NO_CHANNEL
     n = np.maximum(np.ceil(length / spacing_m).astype(int), 1) + 1
     which = np.repeat(np.arange(len(a)), n)
     frac = (np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n - 1, n)
@@ -70,7 +115,7 @@ def blocked_at(path: WaypointPath, progress_m: float, offset_m: float, segments,
     s, d = path.frame(pts, progress_m - slab_m, s_end + slab_m)
     ahead = (s >= progress_m) & (s <= s_end) & (np.abs(d) <= lateral_m)
     if not ahead.any():
-        return None
+        return None, NO_CHANNEL
     slab = ((s[ahead] - progress_m) / slab_m).astype(int)
     d = d[ahead]
     n_slabs = int(math.ceil((s_end - progress_m) / slab_m))
@@ -95,7 +140,9 @@ def blocked_at(path: WaypointPath, progress_m: float, offset_m: float, segments,
     # path moves its points a little from slab to slab, which must not connect the water
     # behind it, while a channel shifting sideways up to 3 m per slab still connects.
     overlap = 0.5 * min_passage_m
+    keep = overlap if clearance_m is None else max(clearance_m, overlap)
     reach = [(offset_m - overlap, offset_m + overlap)]  # the boat itself
+    shifts = []  # (slab, offset) where the path's line has not the room it needs
     for j in range(n_slabs):
         if not occupied[j]:
             reach = [(-lateral_m, lateral_m)]  # nothing in this slab: all of it is open
@@ -108,9 +155,21 @@ def blocked_at(path: WaypointPath, progress_m: float, offset_m: float, segments,
                     reached.append((g0, g1))
                     break
         if not reached:
-            return progress_m + j * slab_m
+            return progress_m + j * slab_m, _channel(shifts, progress_m, slab_m)
         reach = reached
-    return None
+        if not any(g0 <= -overlap and g1 >= overlap for g0, g1 in reached):
+            # the line d = 0 is too close to something: into the reached interval nearest it
+            targets = [((g0 + g1) / 2 if g1 - g0 < 2 * keep else min(max(0.0, g0 + keep), g1 - keep))
+                       for g0, g1 in reached]
+            shifts.append((j, min(targets, key=abs)))
+    return None, _channel(shifts, progress_m, slab_m)
+
+
+def _channel(shifts, progress_m: float, slab_m: float) -> Channel:
+    if not shifts:
+        return NO_CHANNEL
+    j, d = (np.array(v, float) for v in zip(*shifts))
+    return Channel(progress_m + j * slab_m, d, slab_m)
 
 
 def _inside_circle(segments: np.ndarray, centre: np.ndarray, radius_m: float):
@@ -139,8 +198,10 @@ class WayAhead:
     """Blocked, blind or open, step by step, with the hysteresis a noisy scan needs."""
 
     def __init__(self, min_passage_m: float, stop_short_m: float, decel_mps2: float,
-                 resume_after_s: float, sweep_every_s: float = 0.5):
+                 resume_after_s: float, sweep_every_s: float = 0.5,
+                 clearance_m: float | None = None):
         self.min_passage_m = min_passage_m
+        self.clearance_m = clearance_m  # from a gap's sides to the boat's line (`sweep`)
         self.stop_short_m = stop_short_m  # from the obstruction to the boat's origin
         self.decel_mps2 = decel_mps2
         self.resume_after_s = resume_after_s
@@ -152,13 +213,15 @@ class WayAhead:
         self._clear_s = 0.0
         self._blind_stop_m: float | None = None
         self._since_sweep = None  # s since the last sweep (None: sweep now)
+        self.channel = NO_CHANNEL  # where the last sweep found the way off the path
 
     def memory(self) -> tuple:
         """What `update` moves on, to put back with `restore` (all of it immutable)."""
-        return self._stop, self._clear_s, self._blind_stop_m, self._since_sweep
+        return self._stop, self._clear_s, self._blind_stop_m, self._since_sweep, self.channel
 
     def restore(self, memory: tuple) -> None:
-        self._stop, self._clear_s, self._blind_stop_m, self._since_sweep = memory
+        (self._stop, self._clear_s, self._blind_stop_m, self._since_sweep,
+         self.channel) = memory
 
     def update(self, path: WaypointPath, progress_m: float, offset_m: float, speed_mps: float,
                segments, blind: bool, period_s: float, lookahead_m: float) -> Stop | None:
@@ -174,7 +237,8 @@ class WayAhead:
             if self._since_sweep < self.sweep_every_s - 1e-9:
                 return self._stop  # as at the last sweep (1 m at 2 m/s)
         elapsed, self._since_sweep = self._since_sweep or 0.0, 0.0
-        at = blocked_at(path, progress_m, offset_m, segments, self.min_passage_m, lookahead_m)
+        at, self.channel = sweep(path, progress_m, offset_m, segments, self.min_passage_m,
+                                 lookahead_m, clearance_m=self.clearance_m)
         if at is not None:
             self._clear_s = 0.0
             self._stop = Stop(at - self.stop_short_m, f"way blocked at {at - progress_m:.0f} m", at)

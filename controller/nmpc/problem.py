@@ -81,7 +81,12 @@ class NmpcConfig:
     hull_radius_m: float = 3.0  # R_b
     hull_offsets_m: tuple[float, float] = (2.0, -2.0)  # circle centres along body x (l_b, -l_s)
     separation_m: float = 2.0  # d_p: 2 m in simulation, 4 m in the field
-    min_half_axis_m: float = 0.1  # the slack may shrink R_b + d_p down to this
+    # The slack may shrink R_b + d_p down to this (None: R_b, the hull circle touching):
+    # the room the passage rule (`min_passage_m`, 2 R_b) gives the hull is the room the OCP
+    # lets it take, so a gap the rule calls open is passed with the circles clear of its
+    # sides, and one it calls blocked is waited for. (The paper's 0.1 m let the plan push
+    # the circles 2.9 m into a barge's end rather than leave the path for the gap.)
+    min_half_axis_m: float | None = None
     # How the QP treats the obstacle rows: "exact-penalty" (each row may be violated at a
     # cost of obstacle_l1 per unit of h, plus obstacle_l2 / 2 per unit squared: the QP is
     # feasible whatever a crowded canal or a mistaken track asks, and equals the hard one
@@ -104,6 +109,8 @@ class NmpcConfig:
     stop_margin_m: float = 1.0  # stop this far beyond R_b + d_p from the obstruction
     stop_decel_mps2: float = 0.06  # the reference's braking: gentle, as the throttle reverses at 10 %/s
     resume_after_s: float = 1.0  # the way must stay clear this long before going on
+    channel_ramp_m: float = 20.0  # where the way lies off the path (a gap beside a barge),
+    # the reference moves over to it along this many metres before, and back after
     boat: BoatParams = field(default=IDENTIFIED)
 
     def __post_init__(self) -> None:
@@ -144,8 +151,8 @@ class NmpcConfig:
             if getattr(self, name) < 0:
                 bad(name, "must not be negative")
         for name in ("step_s", "control_period_s", "nT_max", "nS_max", "dnT_max", "dnS_max",
-                     "hull_radius_m", "min_half_axis_m", "segment_range_m", "smooth_eps",
-                     "min_passage_m", "stop_decel_mps2"):
+                     "hull_radius_m", "segment_range_m", "smooth_eps",
+                     "min_passage_m", "stop_decel_mps2", "channel_ramp_m"):
             if getattr(self, name) <= 0:
                 bad(name, "must be positive")
         for name in ("horizon", "rk4_substeps", "segment_slots"):
@@ -155,8 +162,9 @@ class NmpcConfig:
             bad("vessel_slots", "must be a whole number >= 0")
         if self.control_period_s > self.step_s:
             bad("control_period_s", "must not exceed step_s")
-        if self.min_half_axis_m >= self.hull_radius_m + self.separation_m:
-            bad("min_half_axis_m", "must be below R_b + d_p")
+        if self.min_half_axis_m is not None and not (
+                0 < self.min_half_axis_m <= self.hull_radius_m + self.separation_m):
+            bad("min_half_axis_m", "must be positive and at most R_b + d_p")
         if len(self.hull_offsets_m) != 2:
             bad("hull_offsets_m", "needs the two circle centres")
         if self.obstacle_rows not in OBSTACLE_ROWS:
@@ -192,8 +200,10 @@ class NmpcConfig:
 
     @property
     def slack_min_m(self) -> float:
-        """Lower bound of s_i: the minor half axis R_b + d_p + s_i stays >= min_half_axis_m."""
-        return -(self.hull_radius_m + self.separation_m) + self.min_half_axis_m
+        """Lower bound of s_i: the minor half axis R_b + d_p + s_i stays >= min_half_axis_m
+        (R_b when not given)."""
+        floor = self.hull_radius_m if self.min_half_axis_m is None else self.min_half_axis_m
+        return min(-(self.hull_radius_m + self.separation_m) + floor, 0.0)
 
 
 # -- the runtime parameters of the problem: one flat vector --------------------------------

@@ -162,7 +162,8 @@ def reference_trajectory(path: WaypointPath, position, heading_rad: float, speed
     asin(V_across / u_water), as a helmsman holds a boat on a line across a stream; without
     it, the heading weight would pull the boat off its line to hold the leg's direction.
     `offset_m` moves the reference across the path (+ to starboard), as the rules of the road
-    ask when meeting or overtaking another vessel (`seamanship`).
+    ask when meeting or overtaking another vessel (`seamanship`): a number, or a function of
+    the arc length (a gap off the path ahead, `passage.Channel`).
     """
     speed_mps = finite_number(speed_mps, "target speed")
     if speed_mps < 0:
@@ -176,8 +177,10 @@ def reference_trajectory(path: WaypointPath, position, heading_rad: float, speed
     else:
         s, speed = _stopping(s0, speed_mps, stop_at_m, decel_mps2, t)
     xy, psi = path.at(s)  # leg headings, already continuous along the path
-    if offset_m:
-        xy = xy + offset_m * np.column_stack([-np.sin(psi), np.cos(psi)])
+    offset = offset_m(s) if callable(offset_m) else offset_m
+    if np.any(offset):
+        xy = xy + np.asarray(offset, float)[..., None] * np.column_stack([-np.sin(psi),
+                                                                          np.cos(psi)])
     vn, ve = float(current[0]), float(current[1])
     if vn or ve:
         across = -vn * np.sin(psi) + ve * np.cos(psi)  # to starboard of the leg

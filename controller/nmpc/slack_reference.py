@@ -192,9 +192,11 @@ def forced_slack_at_numpy(points: np.ndarray, headings: np.ndarray, segments: np
 
 
 def forced_slack(path: WaypointPath, lo_m: np.ndarray, hi_m: np.ndarray, segments: np.ndarray,
-                 margin_m: float, slack_min_m: float, spacing_m: float = 1.0) -> np.ndarray:
+                 margin_m: float, slack_min_m: float, spacing_m: float = 1.0,
+                 offset=None) -> np.ndarray:
     """Per stage, the most negative forced slack (`forced_slack_at`) over the path's arc
-    lengths [lo_m, hi_m] (one interval a stage), sampled every `spacing_m`."""
+    lengths [lo_m, hi_m] (one interval a stage), sampled every `spacing_m`; `offset(s)`: the
+    line the boat follows across the path there (+ to starboard), as the reference's."""
     lo = np.minimum(np.maximum(np.asarray(lo_m, float), 0.0), path.length)
     hi = np.minimum(np.maximum(np.asarray(hi_m, float), lo), path.length)
     out = np.zeros(len(lo))
@@ -202,7 +204,12 @@ def forced_slack(path: WaypointPath, lo_m: np.ndarray, hi_m: np.ndarray, segment
         return out
     start = float(lo.min())
     count = int((float(hi.max()) - start) / spacing_m + 1.999999)
-    points, headings = path.at(start + spacing_m * np.arange(count))
+    s = start + spacing_m * np.arange(count)
+    points, headings = path.at(s)
+    if offset is not None:
+        d = np.asarray(offset(s), float)
+        if d.any():
+            points = points + d[:, None] * np.column_stack([-np.sin(headings), np.cos(headings)])
     forced = forced_slack_at(points, headings, segments, margin_m, slack_min_m)
     if not forced.any():
         return out

@@ -10,7 +10,7 @@ from controller.errors import InputError
 from controller.model import SMOOTH, plant_step_function
 from controller.nmpc import NmpcConfig, NmpcController
 from controller.nmpc.bench import bend_canal, hull_centres, straight_canal, visible_segments
-from controller.nmpc.passage import WayAhead, blocked_at
+from controller.nmpc.passage import WayAhead, blocked_at, sweep
 from controller.nmpc.reference import reference_trajectory, waypoint_path
 
 PATH = waypoint_path([[0.0, 0.0], [300.0, 0.0]])
@@ -35,6 +35,32 @@ def test_the_way_is_blocked_where_no_passage_of_two_hull_circles_is_left(obstacl
         assert at is None
     else:
         assert blocked - 1.0 <= at <= blocked
+
+
+def test_a_gap_off_the_path_is_the_channel_the_reference_takes():
+    """Issue 34 (4): a barge from the south quay leaves 7 m to the north one. The way is
+    open, and the sweep says where: the path's line (d = 0) has no room beside the barge,
+    so there the line moves to the gap's middle (narrower than 2 (R_b + d_p)); elsewhere,
+    and with the barge gone, the path itself is open (no channel)."""
+    barge = [across(140.0, -8.0, 1.0), [142.0, 1.0, 0.0, 4.0], across(144.0, -8.0, 1.0)]
+    at, channel = sweep(PATH, 100.0, 0.0, np.vstack([WALLS, barge]), 6.0, 60.0,
+                        clearance_m=5.0)
+    assert at is None and channel
+    assert np.all(channel.offset_m == pytest.approx(4.5))  # the middle of (1, 8)
+    assert 138.0 <= channel.start_m.min() and channel.start_m.max() <= 145.0
+    ramp = channel.at(np.array([100.0, 125.0, 142.0, 160.0, 170.0]), 20.0)
+    assert ramp[0] == 0.0 and 0.0 < ramp[1] < 4.5 and ramp[2] == pytest.approx(4.5)
+    assert 0.0 < ramp[3] < 4.5 and ramp[4] == 0.0  # faded in before, out after
+    # a 10 m gap: the line moves R_b + d_p clear of the barge's end, no farther
+    wide = [across(140.0, -8.0, -2.0), [142.0, -2.0, 0.0, 4.0], across(144.0, -8.0, -2.0)]
+    at, channel = sweep(PATH, 100.0, 0.0, np.vstack([WALLS, wide]), 6.0, 60.0,
+                        clearance_m=5.0)
+    assert at is None and channel and np.all(channel.offset_m == pytest.approx(3.0))
+    # 1 m clear of the line's hull circle: the path itself passes (the OCP keeps d_p)
+    narrow = [across(140.0, -8.0, -4.0), [142.0, -4.0, 0.0, 4.0], across(144.0, -8.0, -4.0)]
+    assert not sweep(PATH, 100.0, 0.0, np.vstack([WALLS, narrow]), 6.0, 60.0,
+                     clearance_m=5.0)[1]
+    assert not sweep(PATH, 100.0, 0.0, WALLS, 6.0, 60.0, clearance_m=5.0)[1]
 
 
 def test_walls_tilted_against_the_path_do_not_open_the_water_behind_them():

@@ -23,8 +23,12 @@ def test_config_defaults_are_the_papers_table():
     assert np.allclose(c.Q_T, 25 * c.Q) and c.slack_weight == 1e4
     assert (c.nT_max, c.nS_max, c.dnT_max, c.dnS_max) == (100, 100, 10, 40)
     assert (c.hull_radius_m, c.hull_offsets_m, c.separation_m) == (3.0, (2.0, -2.0), 2.0)
-    assert c.slack_min_m == pytest.approx(-(3.0 + 2.0) + 0.1)
-    assert NmpcConfig(separation_m=4.0).slack_min_m == pytest.approx(-6.9)
+    # the slack gives up the separation d_p, never the hull circle's own radius (the room
+    # the passage rule gives the hull: 2 R_b); a smaller floor may be asked for
+    assert c.slack_min_m == pytest.approx(-2.0)
+    assert NmpcConfig(separation_m=4.0).slack_min_m == pytest.approx(-4.0)
+    assert NmpcConfig(min_half_axis_m=0.1).slack_min_m == pytest.approx(-4.9)
+    assert NmpcConfig(separation_m=0.0).slack_min_m == 0.0
 
 
 @pytest.mark.parametrize("changes, words", [
@@ -36,7 +40,8 @@ def test_config_defaults_are_the_papers_table():
     ({"horizon": 0}, "positive integer"),
     ({"dnT_max": 0.0}, "positive"),
     ({"control_period_s": 2.0}, "step_s"),
-    ({"separation_m": 0.0, "hull_radius_m": 0.05}, "min_half_axis"),
+    ({"min_half_axis_m": 6.0}, "min_half_axis"),
+    ({"min_half_axis_m": 0.0}, "min_half_axis"),
     ({"slack_weight": [1e4]}, "'slack_weight': expected a number"),
     ({"horizon": "25"}, "expected numbers"),
 ])
