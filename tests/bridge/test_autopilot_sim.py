@@ -13,13 +13,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bridge import ardupilot
-from bridge.autopilot_rc import RcInput
-from bridge.autopilot_sim import AutopilotSim, open_connection
-from bridge.clock import VirtualClock
+from bridge.shared import ardupilot
+from bridge.autopilot_sim.rc import RcInput
+from bridge.autopilot_sim.rover import AutopilotSim, open_connection
+from bridge.shared.clock import VirtualClock
 from bridge.main import main
-from bridge.mavlink_plant import free_udp_port
-from bridge.signing import load_signing_key
+from bridge.autopilot_sim.plant import free_udp_port
+from bridge.shared.signing import load_signing_key
 from controller.errors import InputError
 from scenarios.scenario_file import load_scenario
 

@@ -8,11 +8,11 @@ from pathlib import Path
 
 import pytest
 
-from bridge.autopilot_sim import AutopilotSim, clock_faults_checked
-from bridge.clock import VirtualClock
+from bridge.autopilot_sim.rover import AutopilotSim, clock_faults_checked
+from bridge.shared.clock import VirtualClock
 from bridge.commands.autopilot_sim import parse_clock_faults
-from bridge.link import AutopilotLink
-from bridge.mavlink_plant import free_udp_port
+from bridge.onboard.link import AutopilotLink
+from bridge.autopilot_sim.plant import free_udp_port
 from controller.errors import InputError
 from scenarios.scenario_file import load_scenario
 

@@ -13,15 +13,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bridge.ardupilot import SITL_DEFAULT_HOME
-from bridge.autopilot_ekf import EkfModel, NoiseSpec
-from bridge.autopilot_sim import AutopilotSim
-from bridge.clock import VirtualClock
-from bridge.lidar_source import SimLidarSource
-from bridge.link import AutopilotLink
-from bridge.mavlink_plant import free_udp_port
-from bridge.onboard import BridgeOptions, OnboardLoop
-from bridge.step_log import StepLog
+from bridge.shared.ardupilot import SITL_DEFAULT_HOME
+from bridge.autopilot_sim.ekf import EkfModel, NoiseSpec
+from bridge.autopilot_sim.rover import AutopilotSim
+from bridge.shared.clock import VirtualClock
+from bridge.lidar import SimLidarSource
+from bridge.onboard.link import AutopilotLink
+from bridge.autopilot_sim.plant import free_udp_port
+from bridge.onboard.loop import BridgeOptions, OnboardLoop
+from bridge.onboard.step_log import StepLog
 from controller.nmpc.reference import waypoint_path
 from scenarios.loop.controllers import NmpcController
 from scenarios.scenario_file import load_scenario

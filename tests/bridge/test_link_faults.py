@@ -17,15 +17,15 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from bridge.ardupilot import SITL_DEFAULT_HOME
-from bridge.autopilot_sim import AutopilotSim
-from bridge.clock import VirtualClock
-from bridge.lidar_source import SimLidarSource
-from bridge.link import AutopilotLink
-from bridge.lossy_relay import TO_AUTOPILOT, TO_BRIDGE, LossyRelay
-from bridge.mavlink_plant import free_udp_port
-from bridge.onboard import EXIT_GOAL, EXIT_STOPPED, BridgeOptions, OnboardLoop
-from bridge.step_log import StepLog
+from bridge.shared.ardupilot import SITL_DEFAULT_HOME
+from bridge.autopilot_sim.rover import AutopilotSim
+from bridge.shared.clock import VirtualClock
+from bridge.lidar import SimLidarSource
+from bridge.onboard.link import AutopilotLink
+from bridge.autopilot_sim.lossy_relay import TO_AUTOPILOT, TO_BRIDGE, LossyRelay
+from bridge.autopilot_sim.plant import free_udp_port
+from bridge.onboard.loop import EXIT_GOAL, EXIT_STOPPED, BridgeOptions, OnboardLoop
+from bridge.onboard.step_log import StepLog
 from scenarios.loop.controllers import NmpcController
 from scenarios.scenario_file import load_scenario
 

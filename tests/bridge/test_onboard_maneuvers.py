@@ -11,13 +11,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bridge.autopilot_sim import AutopilotSim
-from bridge.clock import VirtualClock
-from bridge.link import AutopilotLink
-from bridge.lossy_relay import LossyRelay
-from bridge.mavlink_plant import free_udp_port
-from bridge.onboard import EXIT_GOAL, EXIT_STOPPED, BridgeOptions
-from bridge.onboard_maneuvers import ManeuverSession, coast_distance_m
+from bridge.autopilot_sim.rover import AutopilotSim
+from bridge.shared.clock import VirtualClock
+from bridge.onboard.link import AutopilotLink
+from bridge.autopilot_sim.lossy_relay import LossyRelay
+from bridge.autopilot_sim.plant import free_udp_port
+from bridge.onboard.loop import EXIT_GOAL, EXIT_STOPPED, BridgeOptions
+from bridge.onboard.maneuvers import ManeuverSession, coast_distance_m
 from controller.identification.dataflash import read_dataflash
 from controller.identification.log_runs import Window, cut_windows, find_runs
 from controller.identification.logs import read_log

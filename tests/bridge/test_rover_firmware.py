@@ -16,12 +16,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bridge.autopilot_sim import AutopilotSim
-from bridge.clock import VirtualClock
-from bridge.link import AutopilotLink
-from bridge.lossy_relay import LossyRelay
-from bridge.mavlink_plant import free_udp_port
-from bridge.onboard import BridgeOptions, prepare_link
+from bridge.autopilot_sim.rover import AutopilotSim
+from bridge.shared.clock import VirtualClock
+from bridge.onboard.link import AutopilotLink
+from bridge.autopilot_sim.lossy_relay import LossyRelay
+from bridge.autopilot_sim.plant import free_udp_port
+from bridge.onboard.loop import BridgeOptions, prepare_link
 from scenarios.scenario_file import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -93,7 +93,7 @@ def test_positions_are_the_worlds_whatever_the_ekf_origin(rig, straight):
     """The boat moves (1 m/s) before its first fix at 5 s: the EKF origin is ~5 m along the
     canal. Placed on the Earth through the geodetic origin, the bridge's state is the truth;
     without an origin it refuses, saying how to give one."""
-    from bridge.ardupilot import SITL_DEFAULT_HOME
+    from bridge.shared.ardupilot import SITL_DEFAULT_HOME
     from controller.errors import InputError
 
     no_origin = replace(straight, geodetic_origin=None)  # the simulator puts it at SITL's home
@@ -194,8 +194,8 @@ class NoLidar:
 
 def run_loop(r, tmp_path, controller, at_steps=None, **options):
     """The onboard loop on the rig; `at_steps` = {step: action(rig)} applied as it runs."""
-    from bridge.onboard import OnboardLoop
-    from bridge.step_log import StepLog
+    from bridge.onboard.loop import OnboardLoop
+    from bridge.onboard.step_log import StepLog
 
     log = StepLog(tmp_path)
     options = {"mode": "MANUAL", "arm": True, "ekf_timeout_s": 30.0, "duration_s": 8.0, **options}

@@ -340,7 +340,7 @@ def sitl_command(parm_file: Path, port: int = DEFAULT_PORT, host: str = DEFAULT_
     scenario's geodetic origin, else SITL's own default (given explicitly, so that the
     bridge's `--origin` can match it).
     """
-    from bridge.ardupilot import SITL_DEFAULT_HOME
+    from bridge.shared.ardupilot import SITL_DEFAULT_HOME
 
     target = "127.0.0.1" if host in ("", "127.0.0.1") else host
     if target in ("0.0.0.0", "::"):
@@ -362,8 +362,8 @@ def bridge_command(scenario_file, geodetic_origin: tuple | None) -> str:
     """The `canalnav bridge` command that drives that SITL through the MAVProxy output
     sim_vehicle.py opens on udp 14550, in the frame SITL's home puts the scenario in: a
     scenario without [origin] needs `--origin` at SITL's default home."""
-    from bridge.ardupilot import SITL_DEFAULT_HOME
-    from bridge.onboard import format_origin
+    from bridge.shared.ardupilot import SITL_DEFAULT_HOME
+    from bridge.onboard.loop import format_origin
 
     parts = ["canalnav bridge --connect udp:127.0.0.1:14550", f"--scenario {scenario_file}"]
     if geodetic_origin is None:

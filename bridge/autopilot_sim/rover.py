@@ -18,11 +18,11 @@ What is simulated, as ArduPilot Rover does it:
   message is answered with a COMMAND_ACK for command 11, as ArduPilot does.
 - RC_CHANNELS_OVERRIDE addressed to our system id from the GCS sysid (MAV_GCS_SYSID /
   SYSID_MYGCS) only, per-channel release/ignore values, RC_OPTIONS, RC_OVERRIDE_TIME
-  (see `autopilot_rc`). Any other message is answered whoever sends it, as ArduPilot does.
-- Streams (defaults in `autopilot_streams.DEFAULT_INTERVALS`): HEARTBEAT, SYS_STATUS and
+  (see `rc`). Any other message is answered whoever sends it, as ArduPilot does.
+- Streams (defaults in `streams.DEFAULT_INTERVALS`): HEARTBEAT, SYS_STATUS and
   EKF_STATUS_REPORT at 1 Hz; ATTITUDE, LOCAL_POSITION_NED, GLOBAL_POSITION_INT at 4 Hz;
   RC_CHANNELS and SERVO_OUTPUT_RAW off. A reboot forgets requested rates.
-- The EKF (`autopilot_ekf`): attitude only until `ekf_delay_s` after boot (the first GPS
+- The EKF (`ekf`): attitude only until `ekf_delay_s` after boot (the first GPS
   fix; never before start-up is over), then position and velocity; LOCAL_POSITION_NED and
   GLOBAL_POSITION_INT are sent only once the position is valid. The scenario's (0, 0) is on
   the Earth at its `[origin]` (else at ArduPilot SITL's default home, as SITL puts it);
@@ -65,14 +65,14 @@ import numpy as np
 
 from controller.errors import InputError
 
-from . import ardupilot
-from . import autopilot_streams as st
-from .autopilot_ekf import EkfModel
+from bridge.shared import ardupilot
+from . import streams as st
+from .ekf import EkfModel
 from controller.geodetic import geodetic_to_ned, ned_to_geodetic  # both ends agree
-from .autopilot_params import ParamTable, param_id
-from .autopilot_rc import UINT16_MAX, RcInput
+from .params import ParamTable, param_id
+from .rc import UINT16_MAX, RcInput
 from controller.pwm import CommandChannels
-from .signing import rejected_for_signature
+from bridge.shared.signing import rejected_for_signature
 
 COMPONENT_ID = 1  # MAV_COMP_ID_AUTOPILOT1
 PARAMS_PER_PUMP = 20  # PARAM_REQUEST_LIST answers are spread over pumps, as ArduPilot's queue
@@ -202,7 +202,7 @@ class AutopilotSim:
         self._steps = 0
         self._outputs = (0.0, 0.0)
         if log_dir is not None:
-            from .autopilot_log import AutopilotLog
+            from .log import AutopilotLog
 
             self._log = AutopilotLog(log_dir)
         self._boot(0.0)
@@ -317,7 +317,7 @@ class AutopilotSim:
 
     @property
     def estimate(self):
-        """The EKF's estimate now (autopilot_ekf.Estimate, in the scenario's frame)."""
+        """The EKF's estimate now (ekf.Estimate, in the scenario's frame)."""
         return self._estimate()
 
     def geodetic_position(self, e) -> tuple[float, float]:
