@@ -37,7 +37,7 @@ from controller.errors import CanalnavError, InputError
 
 from bridge.shared.ardupilot import MODE_NAMES, MODES, OVERRIDE_IGNORE, OVERRIDE_RELEASE
 from bridge.onboard.boot_clock import BootClock
-from bridge.shared.signing import rejected_for_signature
+from bridge.shared.signing import counted_as_bad_data
 from bridge.onboard.ekf_state import (EkfState, horizontal_position_ok, state_from_global,
                               state_from_local)
 from controller.geodetic import geodetic_to_ned
@@ -249,13 +249,9 @@ class AutopilotLink:
             return False
 
     def _handle(self, msg) -> int:
-        kind = msg.get_type()
-        if kind == "BAD_DATA":
-            if rejected_for_signature(msg):
-                self.counters.rejected_signature += 1
-            else:
-                self.counters.bad_data += 1
+        if counted_as_bad_data(msg, self.counters):
             return 0
+        kind = msg.get_type()
         self._log(msg.get_msgbuf(), sent=False)
         src = (msg.get_srcSystem(), msg.get_srcComponent())
         if self.target_component is None:

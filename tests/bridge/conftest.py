@@ -184,3 +184,21 @@ def make_autopilot(vclock):
 @pytest.fixture
 def udp_port():
     return free_udp_port
+
+
+@pytest.fixture
+def sim_rig(tmp_path):
+    """Factory: `kind(scenario, tmp_path / "rigN", **kwargs)`, a `SimRig` of tests/bridge/rigs.py
+    unless told otherwise, every rig made closed after the test."""
+    from .rigs import SimRig
+
+    made = []
+
+    def make(scenario, kind=SimRig, **kwargs):
+        rig = kind(scenario, tmp_path / f"rig{len(made)}", **kwargs)
+        made.append(rig)
+        return rig
+
+    yield make
+    for rig in made:
+        rig.close()
