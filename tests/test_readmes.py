@@ -1,5 +1,6 @@
-"""The READMEs beside the code link to each other: every relative link names a file of the
-checkout and, with `#anchor`, a heading of that file (GitHub's anchors)."""
+"""The READMEs beside the code: every relative link names a file of the checkout and, with
+`#anchor`, a heading of that file (GitHub's anchors); every `Usage:` line names a `canalnav`
+command and only options its `--help` lists."""
 
 from __future__ import annotations
 
@@ -43,3 +44,35 @@ def test_every_relative_link_in_a_readme_resolves():
             elif anchor and (dest.suffix != ".md" or anchor not in _anchors(dest)):
                 bad.append(f"{where}: no such heading")
     assert not bad, bad
+
+
+def _parser_of(parser, words):
+    """The sub-parser of `canalnav WORDS...`; KeyError when a word is no subcommand."""
+    for word in words:
+        sub = next(a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction")
+        parser = sub.choices[word]
+    return parser
+
+
+def test_every_usage_line_names_a_command_and_options_it_has():
+    from bridge.main import build_parser
+
+    root, bad, seen = build_parser(), [], 0
+    for readme in _readmes():
+        for usage in re.findall(r"^Usage: `(canalnav [^`]*)`", readme.read_text(), re.M):
+            seen += 1
+            words = []
+            for word in usage.split()[1:]:
+                try:
+                    _parser_of(root, words + [word])
+                except (KeyError, StopIteration):
+                    break
+                words.append(word)
+            if not words:
+                bad.append(f"{readme.relative_to(ROOT)}: {usage}: no such command")
+                continue
+            text = _parser_of(root, words).format_help()
+            bad += [f"{readme.relative_to(ROOT)}: canalnav {' '.join(words)} has no {option}"
+                    for option in re.findall(r"(?<![\w-])(--?[a-zA-Z][\w-]*)", usage)
+                    if option not in text]
+    assert seen >= 15 and not bad, (seen, bad)
