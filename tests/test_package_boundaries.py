@@ -82,3 +82,48 @@ def test_no_module_imports_itself_through_others():
         if m not in state:
             visit(m, [])
     assert not circles, [" -> ".join(c) for c in circles]
+
+
+BRIDGE_ROOMS = {  # bridge/__init__.py: the rooms of `bridge` and which others each may import
+    "bridge.shared": set(),
+    "bridge.lidar": set(),
+    "bridge.onboard": {"bridge.shared", "bridge.lidar"},
+    "bridge.autopilot_sim": {"bridge.shared"},
+    "bridge.sitl": {"bridge.shared"},
+}
+BRIDGE_EXCEPTIONS = {  # module -> the one further room it may import, and why
+    "bridge.autopilot_sim.plant": "bridge.onboard",  # joins the boat side and the simulator
+    "bridge.sitl.json_physics": "bridge.onboard",  # prints the `canalnav bridge` command line
+}
+
+
+def _room(module: str) -> str | None:
+    return next((r for r in BRIDGE_ROOMS if module == r or module.startswith(r + ".")), None)
+
+
+def test_every_bridge_module_lives_in_a_room_or_is_the_command_line():
+    loose = [m for m in _graph() if m.startswith("bridge.") and _room(m) is None
+             and m != "bridge.main" and not m.startswith("bridge.commands")]
+    assert not loose, loose
+
+
+def test_bridge_rooms_import_only_what_they_may():
+    """The boat side never imports a simulator; the shared room imports no other room."""
+    bad = []
+    for m, targets in _graph().items():
+        room = _room(m)
+        if room is None:
+            continue
+        for t in targets:
+            other = _room(t)
+            if (other not in (None, room) and other not in BRIDGE_ROOMS[room]
+                    and BRIDGE_EXCEPTIONS.get(m) != other):
+                bad.append(f"{m} imports {t}")
+    assert not bad, bad
+
+
+def test_only_the_command_line_imports_the_command_line():
+    bad = [f"{m} imports {t}" for m, targets in _graph().items() for t in targets
+           if (t == "bridge.main" or t.startswith("bridge.commands"))
+           and not (m == "bridge.main" or m.startswith("bridge.commands"))]
+    assert not bad, bad

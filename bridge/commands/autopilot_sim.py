@@ -64,7 +64,7 @@ def _ekf_noise(args):
 
     from controller.errors import InputError
 
-    from bridge.autopilot_ekf import NoiseSpec
+    from bridge.autopilot_sim.ekf import NoiseSpec
 
     if not (math.isfinite(args.heading_bias) and math.isfinite(args.heading_wander)
             and args.heading_wander >= 0):
@@ -114,9 +114,9 @@ def run(args) -> int:
     from controller.errors import InputError
     from scenarios.scenario_file import load_scenario
 
-    from bridge.autopilot_sim import AutopilotSim
-    from bridge.clock import RealClock
-    from bridge.signing import load_signing_key
+    from bridge.autopilot_sim.rover import AutopilotSim
+    from bridge.shared.clock import RealClock
+    from bridge.shared.signing import load_signing_key
 
     if not args.speedup > 0:
         raise InputError(f"--speedup must be positive, got {args.speedup}")

@@ -87,7 +87,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from bridge.onboard import BridgeOptions, parse_origin, run_bridge
+    from bridge.onboard.loop import BridgeOptions, parse_origin, run_bridge
     from scenarios.results.foxglove_messages import require_viz
     from scenarios.results.mcap_log import parse_live
 

@@ -46,6 +46,6 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from bridge.onboard_maneuvers import run_on_boat
+    from bridge.onboard.maneuvers import run_on_boat
 
     return run_on_boat(args)

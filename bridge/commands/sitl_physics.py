@@ -7,7 +7,7 @@ import signal
 import sys
 from pathlib import Path
 
-PARM_FILE = Path(__file__).resolve().parent.parent / "sitl_boat.parm"
+PARM_FILE = Path(__file__).resolve().parent.parent / "sitl" / "sitl_boat.parm"
 
 
 def register(sub) -> None:
@@ -18,8 +18,8 @@ def register(sub) -> None:
         "servo packets (UDP, port 9002 + 10 per instance) in lock-step with its frame "
         "counter, with the boat's state as JSON. The boat starts at the scenario's initial "
         "state, in its current, with its plant parameters and actuator rates. Start SITL "
-        "as printed (ArduRover as a boat, bridge/sitl_boat.parm), then drive it with "
-        "`canalnav bridge`. See bridge/SITL.md. Ctrl-C or SIGTERM stops it, with a summary.",
+        "as printed (ArduRover as a boat, bridge/sitl/sitl_boat.parm), then drive it with "
+        "`canalnav bridge`. See bridge/sitl/README.md. Ctrl-C or SIGTERM stops it, with a summary.",
     )
     p.add_argument("--scenario", required=True, help="scenario file (TOML)")
     p.add_argument("--port", type=int, default=None,
@@ -43,7 +43,7 @@ def run(args) -> int:
     from controller.errors import InputError
     from scenarios.scenario_file import load_scenario
 
-    from bridge.sitl_json import DEFAULT_PORT, SitlPhysicsServer, bridge_command, sitl_command
+    from bridge.sitl.json_physics import DEFAULT_PORT, SitlPhysicsServer, bridge_command, sitl_command
 
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="canalnav sitl-physics: %(message)s")

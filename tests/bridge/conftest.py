@@ -14,11 +14,11 @@ import math
 import numpy as np
 import pytest
 
-import bridge.link  # noqa: F401 - sets MAVLink 2 before any connection is made
-from bridge.ardupilot import DEFAULT_PARAMS, MODE_NAMES, MODES
-from bridge.clock import VirtualClock
+import bridge.onboard.link  # noqa: F401 - sets MAVLink 2 before any connection is made
+from bridge.shared.ardupilot import DEFAULT_PARAMS, MODE_NAMES, MODES
+from bridge.shared.clock import VirtualClock
 from controller.geodetic import ned_to_geodetic
-from bridge.mavlink_plant import free_udp_port
+from bridge.autopilot_sim.plant import free_udp_port
 from pymavlink import mavutil
 
 EKF_GOOD = 1 | 2 | 4 | 8 | 16 | 32
@@ -184,3 +184,21 @@ def make_autopilot(vclock):
 @pytest.fixture
 def udp_port():
     return free_udp_port
+
+
+@pytest.fixture
+def sim_rig(tmp_path):
+    """Factory: `kind(scenario, tmp_path / "rigN", **kwargs)`, a `SimRig` of tests/bridge/rigs.py
+    unless told otherwise, every rig made closed after the test."""
+    from .rigs import SimRig
+
+    made = []
+
+    def make(scenario, kind=SimRig, **kwargs):
+        rig = kind(scenario, tmp_path / f"rig{len(made)}", **kwargs)
+        made.append(rig)
+        return rig
+
+    yield make
+    for rig in made:
+        rig.close()

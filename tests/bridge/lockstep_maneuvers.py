@@ -11,12 +11,12 @@ then `canalnav sysid OUT/ap/00000001.BIN --window ...` with the windows it print
 import sys
 from pathlib import Path
 
-from bridge.autopilot_sim import AutopilotSim
-from bridge.clock import VirtualClock
-from bridge.link import AutopilotLink
-from bridge.mavlink_plant import free_udp_port
-from bridge.onboard import BridgeOptions
-from bridge.onboard_maneuvers import ManeuverSession
+from bridge.autopilot_sim.rover import AutopilotSim
+from bridge.shared.clock import VirtualClock
+from bridge.onboard.link import AutopilotLink
+from bridge.autopilot_sim.plant import free_udp_port
+from bridge.onboard.loop import BridgeOptions
+from bridge.onboard.maneuvers import ManeuverSession
 from controller.identification.maneuvers import PAPER_RUNS, with_overshoots
 from scenarios.scenario_file import load_scenario
 

@@ -13,15 +13,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bridge import ardupilot
-from bridge.autopilot_rc import RcInput
-from bridge.autopilot_sim import AutopilotSim, open_connection
-from bridge.clock import VirtualClock
+from bridge.shared import ardupilot
+from bridge.autopilot_sim.rc import RcInput
+from bridge.autopilot_sim.rover import AutopilotSim, open_connection
+from bridge.shared.clock import VirtualClock
 from bridge.main import main
-from bridge.mavlink_plant import free_udp_port
-from bridge.signing import load_signing_key
+from bridge.autopilot_sim.plant import free_udp_port
+from bridge.shared.signing import load_signing_key
 from controller.errors import InputError
 from scenarios.scenario_file import load_scenario
+
+from .rigs import SimRig
 
 ROOT = Path(__file__).resolve().parents[2]
 STRAIGHT = ROOT / "scenarios" / "straight.toml"
@@ -42,17 +44,15 @@ def scenario():
     return load_scenario(STRAIGHT)
 
 
-class Rig:
-    """A simulator, a virtual clock and pymavlink clients, stepped together."""
+class Rig(SimRig):
+    """The simulator on its virtual clock (tests/bridge/rigs.py, no link of the bridge's) and
+    pymavlink clients, stepped together."""
 
-    def __init__(self, scenario, tmp_path, **kwargs):
-        self.port = free_udp_port()
-        self.clock = VirtualClock(0.01)
+    def __init__(self, scenario, work_dir, **kwargs):
         kwargs.setdefault("ekf_delay_s", 1.0)
         kwargs.setdefault("init_s", 0.0)  # running at once (start-up has its own test)
-        self.sim = AutopilotSim(scenario, f"udpin:127.0.0.1:{self.port}", self.clock,
-                                work_dir=tmp_path, **kwargs)
-        self.clock.add_peer(self.sim.pump)
+        super().__init__(scenario, work_dir, link=False, **kwargs)
+        self.sim = self.autopilot
         self.clients = []
         self.client = self.connect()
 
@@ -116,21 +116,13 @@ class Rig:
     def close(self):
         for c in self.clients:
             c.close()
-        self.sim.close()
+        self.clients = []
+        super().close()
 
 
 @pytest.fixture
-def make_rig(scenario, tmp_path):
-    rigs = []
-
-    def make(**kwargs):
-        rig = Rig(scenario, tmp_path / f"rig{len(rigs)}", **kwargs)
-        rigs.append(rig)
-        return rig
-
-    yield make
-    for rig in rigs:
-        rig.close()
+def make_rig(scenario, sim_rig):
+    return lambda **kwargs: sim_rig(scenario, kind=Rig, **kwargs)
 
 
 # -- heartbeat and parameters -----------------------------------------------------------------

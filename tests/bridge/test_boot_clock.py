@@ -2,7 +2,7 @@
 
 import pytest
 
-from bridge.boot_clock import BootClock
+from bridge.onboard.boot_clock import BootClock
 
 OFFSET = 100.0  # the autopilot booted at bridge time 100 s
 

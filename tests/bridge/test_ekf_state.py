@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from controller.geodetic import geodetic_to_ned, ned_to_geodetic
-from bridge.ekf_state import (EkfState, body_velocity, horizontal_position_ok,
+from bridge.onboard.ekf_state import (EkfState, body_velocity, horizontal_position_ok,
                               predict, predict_vector, state_from_global,
                               state_from_local)
 

@@ -13,18 +13,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bridge.ardupilot import SITL_DEFAULT_HOME
-from bridge.autopilot_ekf import EkfModel, NoiseSpec
-from bridge.autopilot_sim import AutopilotSim
-from bridge.clock import VirtualClock
-from bridge.lidar_source import SimLidarSource
-from bridge.link import AutopilotLink
-from bridge.mavlink_plant import free_udp_port
-from bridge.onboard import BridgeOptions, OnboardLoop
-from bridge.step_log import StepLog
+from bridge.shared.ardupilot import SITL_DEFAULT_HOME
+from bridge.autopilot_sim.ekf import EkfModel, NoiseSpec
+from bridge.lidar import SimLidarSource
+from bridge.onboard.loop import BridgeOptions, OnboardLoop
+from bridge.onboard.step_log import StepLog
 from controller.nmpc.reference import waypoint_path
 from scenarios.loop.controllers import NmpcController
 from scenarios.scenario_file import load_scenario
+
+from .rigs import SimRig
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -32,15 +30,11 @@ ROOT = Path(__file__).resolve().parents[2]
 def _drive(tmp_path, bias_deg: float):
     """straight.toml through the bridge; (true cross-track per step, steps.csv rows)."""
     scenario = load_scenario(ROOT / "scenarios" / "straight.toml")
-    clock = VirtualClock(0.01)
-    port = free_udp_port()
-    sim = AutopilotSim(scenario, f"udpin:127.0.0.1:{port}", clock, seed=4, ekf_delay_s=5.0,
-                       work_dir=tmp_path, ekf_noise=NoiseSpec(
-                           heading_bias_rad=math.radians(bias_deg)))
+    rig = SimRig(scenario, tmp_path, seed=4, ekf_delay_s=5.0,
+                 ekf_noise=NoiseSpec(heading_bias_rad=math.radians(bias_deg)))
+    sim, link = rig.autopilot, rig.link
     truth = {}
-    clock.add_peer(sim.pump)
-    clock.add_peer(lambda now: truth.__setitem__(round(sim.boot_s, 2), sim.true_state[:2]))
-    link = AutopilotLink(f"udpout:127.0.0.1:{port}", clock)
+    rig.clock.add_peer(lambda now: truth.__setitem__(round(sim.boot_s, 2), sim.true_state[:2]))
     log = StepLog(tmp_path)
     loop = OnboardLoop(link, scenario, NmpcController(scenario), SimLidarSource(scenario, seed=4),
                        BridgeOptions(mode="MANUAL", arm=True, duration_s=scenario.duration_s,
@@ -50,8 +44,7 @@ def _drive(tmp_path, bias_deg: float):
         result = loop.run()
     finally:
         log.close()
-        link.close()
-        sim.close()
+        rig.close()
     assert result.reached_goal, result
     rows = [r for r in csv.DictReader(open(tmp_path / "steps.csv")) if r["x_m"]]
     true_xy = np.array([truth[round(float(r["ekf_time_s"]), 2)] for r in rows])

@@ -14,17 +14,17 @@ import pytest
 
 pytest.importorskip("velodyne_decoder")
 
-from bridge.clock import VirtualClock  # noqa: E402
+from bridge.shared.clock import VirtualClock  # noqa: E402
 from bridge.lidar import build_lidar  # noqa: E402
 from bridge.lidar import velodyne_packets as vp  # noqa: E402
 from bridge.lidar.config import parse_lidar_table  # noqa: E402
 from bridge.lidar.merge import MergedLidar  # noqa: E402
 from bridge.lidar.sources import open_sensor  # noqa: E402
 from bridge.lidar.velodyne import VelodynePcapSensor, VelodyneUdpSensor  # noqa: E402
-from bridge.link import AutopilotLink  # noqa: E402
-from bridge.mavlink_plant import free_udp_port  # noqa: E402
-from bridge.onboard import EXIT_GOAL, EXIT_STOPPED, BridgeOptions, OnboardLoop  # noqa: E402
-from bridge.step_log import StepLog  # noqa: E402
+from bridge.onboard.link import AutopilotLink  # noqa: E402
+from bridge.autopilot_sim.plant import free_udp_port  # noqa: E402
+from bridge.onboard.loop import EXIT_GOAL, EXIT_STOPPED, BridgeOptions, OnboardLoop  # noqa: E402
+from bridge.onboard.step_log import StepLog  # noqa: E402
 from scenarios.scenario_file import load_scenario, parse_scenario  # noqa: E402
 
 from .lidar_rig import (BOW_MOUNT, ROOT, PcapSender, VelodyneSender,  # noqa: E402
@@ -88,7 +88,7 @@ def drive(scenario, tmp_path, lidar_specs, senders, controller, duration_s, conf
           autopilot="sim", resume=False, state=(0.0, 0.0, 0.0, 2.0, 0.0, 0.0)):
     """The onboard loop against an autopilot, with the LiDAR from `lidar_specs` fed by
     `senders(clock, autopilot, ports)` on the same virtual clock."""
-    from bridge.autopilot_sim import AutopilotSim
+    from bridge.autopilot_sim.rover import AutopilotSim
 
     from .conftest import FakeAutopilot
 

@@ -156,7 +156,7 @@ def test_the_bridge_judges_free_space_from_where_its_sensors_sit():
     """The merge tells where its sensors are (x, y and height, from the mounts' z down), the
     simulated suite its units, and the bridge's tracker takes them as viewpoints."""
     from bridge.lidar.sim import SimLidarSource
-    from bridge.onboard import _perception_for
+    from bridge.onboard.loop import _perception_for
     from scenarios.scenario_file import load_scenario
 
     merge = MergedLidar([FakeSensor("bow", 5.0), FakeSensor("stern", -5.0)],

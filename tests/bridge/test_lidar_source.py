@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bridge.lidar_source import (ReplayLidarSource, SimLidarSource, make_lidar_source,
+from bridge.lidar import (ReplayLidarSource, SimLidarSource, make_lidar_source,
                                  mount_transform, parse_lidar_option, segments)
 from controller.errors import InputError
 from scenarios.scenario_file import load_scenario

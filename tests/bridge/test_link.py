@@ -14,8 +14,8 @@ import time
 import numpy as np
 import pytest
 
-from bridge.ardupilot import DEFAULT_PARAMS
-from bridge.link import AutopilotLink, LinkError, parse_url
+from bridge.shared.ardupilot import DEFAULT_PARAMS
+from bridge.onboard.link import AutopilotLink, LinkError, parse_url
 from controller.pwm import CommandChannels
 from controller.errors import InputError
 from pymavlink import mavutil

@@ -9,7 +9,6 @@ step up to the fault.
 from __future__ import annotations
 
 import csv
-import io
 from dataclasses import replace
 from pathlib import Path
 
@@ -17,17 +16,15 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from bridge.ardupilot import SITL_DEFAULT_HOME
-from bridge.autopilot_sim import AutopilotSim
-from bridge.clock import VirtualClock
-from bridge.lidar_source import SimLidarSource
-from bridge.link import AutopilotLink
-from bridge.lossy_relay import TO_AUTOPILOT, TO_BRIDGE, LossyRelay
-from bridge.mavlink_plant import free_udp_port
-from bridge.onboard import EXIT_GOAL, EXIT_STOPPED, BridgeOptions, OnboardLoop
-from bridge.step_log import StepLog
+from bridge.shared.ardupilot import SITL_DEFAULT_HOME
+from bridge.lidar import SimLidarSource
+from bridge.autopilot_sim.lossy_relay import TO_AUTOPILOT, TO_BRIDGE
+from bridge.onboard.loop import EXIT_GOAL, EXIT_STOPPED, BridgeOptions, OnboardLoop
+from bridge.onboard.step_log import StepLog
 from scenarios.loop.controllers import NmpcController
 from scenarios.scenario_file import load_scenario
+
+from .rigs import SimRig
 
 ROOT = Path(__file__).resolve().parents[2]
 KEY = bytes(range(32))
@@ -40,27 +37,20 @@ def scenario():
     return replace(s, waypoints=np.array([[0.0, 0.0], [50.0, 0.0], [90.0, 0.0]]))
 
 
-class Rig:
-    """Autopilot <- relay -> bridge link, the onboard loop, and events on the clock."""
+class Rig(SimRig):
+    """Autopilot <- relay -> bridge link (tests/bridge/rigs.py), the onboard loop, and events
+    on the clock."""
 
     def __init__(self, scenario, tmp_path, *, signing=False, resume=False, duration_s=120.0,
                  stale_s=1.0):
-        self.clock = VirtualClock(0.01)
-        port = free_udp_port()
         key = KEY if signing else None
-        self.autopilot = AutopilotSim(scenario, f"udpin:127.0.0.1:{port}", self.clock, seed=4,
-                                      signing_key=key, ekf_delay_s=EKF_DELAY_S,
-                                      work_dir=tmp_path)
-        self.relay = LossyRelay(("127.0.0.1", port), self.clock, seed=4)
+        super().__init__(scenario, tmp_path, seed=4, relay=True, signing_key=key,
+                         ekf_delay_s=EKF_DELAY_S,
+                         link_kwargs={"signing_key": key, "tlog_path": tmp_path / "mavlink.tlog",
+                                      "stale_s": stale_s})
         self.events: list = []  # (time, action)
         self.outputs: list = []  # (time, autopilot's (nT, nS))
-        self.clock.add_peer(self.autopilot.pump)
-        self.clock.add_peer(self.relay.pump)
         self.clock.add_peer(self._events)
-        self.link = AutopilotLink(f"udpout:127.0.0.1:{self.relay.port}", self.clock,
-                                  signing_key=key, tlog_path=tmp_path / "mavlink.tlog",
-                                  stale_s=stale_s)
-        self.console = io.StringIO()
         self.log = StepLog(tmp_path)
         self.loop = OnboardLoop(
             self.link, scenario, NmpcController(scenario), SimLidarSource(scenario, seed=4),
@@ -87,9 +77,7 @@ class Rig:
             return result
         finally:
             self.log.close()
-            self.link.close()
-            self.relay.close()
-            self.autopilot.close()
+            self.close()
 
     def output_at(self, t: float):
         return min(self.outputs, key=lambda o: abs(o[0] - t))[1]

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bridge.mavlink_plant import LinkFaults, MavlinkSimPlant
+from bridge.autopilot_sim.plant import LinkFaults, MavlinkSimPlant
 from scenarios.loop.runner import PLANTS, run_scenario
 from scenarios.scenario_file import parse_scenario
 

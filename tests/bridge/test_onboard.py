@@ -17,12 +17,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bridge.ardupilot import MODES
-from bridge.link import AutopilotLink, LinkError
+from bridge.shared.ardupilot import MODES
+from bridge.onboard.link import AutopilotLink, LinkError
 from bridge.main import main
-from bridge.onboard import (EXIT_GOAL, EXIT_INTERRUPTED, EXIT_REFUSED, EXIT_STOPPED,
+from bridge.onboard.loop import (EXIT_GOAL, EXIT_INTERRUPTED, EXIT_REFUSED, EXIT_STOPPED,
                             BridgeOptions, OnboardLoop, nearest_segment_m, prepare_link)
-from bridge.step_log import STEP_COLUMNS, StepLog
+from bridge.onboard.step_log import STEP_COLUMNS, StepLog
 from scenarios.loop.closed_loop import Decision
 from scenarios.scenario_file import load_scenario
 
@@ -319,7 +319,7 @@ def test_prepare_link_for_a_plant(make_autopilot, vclock, scenario):
 
 
 def test_real_nmpc_and_simulated_lidar_for_a_few_steps(make_autopilot, vclock, tmp_path):
-    from bridge.lidar_source import SimLidarSource
+    from bridge.lidar import SimLidarSource
     from scenarios.loop.controllers import NmpcController
 
     scenario = load_scenario(STRAIGHT)
@@ -392,7 +392,7 @@ def test_frames_that_disagree_are_refused_and_a_missing_origin_is_a_note(make_au
 def test_a_blocked_way_is_a_hold_told_to_the_ground_station(make_autopilot, vclock, tmp_path):
     """The barge of blocked.toml 9 m ahead of a boat at rest: the NMPC holds the boat and
     the bridge says so once, in its log and as STATUSTEXT, and keeps control (no failsafe)."""
-    from bridge.lidar_source import SimLidarSource
+    from bridge.lidar import SimLidarSource
     from scenarios.loop.controllers import NmpcController
 
     scenario = load_scenario(ROOT / "scenarios" / "blocked.toml")
@@ -414,7 +414,7 @@ def test_a_blocked_way_is_a_hold_told_to_the_ground_station(make_autopilot, vclo
 def test_vessels_are_tracked_on_the_bridge_and_logged(make_autopilot, vclock, tmp_path):
     """A boat coming the other way in the simulated LiDAR: the bridge's perception tracks it,
     hands the NMPC the track, and writes it to tracks.csv as it goes."""
-    from bridge.lidar_source import SimLidarSource
+    from bridge.lidar import SimLidarSource
     from scenarios.loop.controllers import NmpcController
     from scenarios.scenario_file import parse_scenario
 
@@ -461,8 +461,8 @@ def test_bridge_writes_run_mcap_on_its_clock(make_autopilot, vclock, tmp_path):
     from mcap.reader import make_reader
     from mcap_protobuf.decoder import DecoderFactory
 
-    from bridge.lidar_source import SimLidarSource
-    from bridge.step_log import BridgeViz
+    from bridge.lidar import SimLidarSource
+    from bridge.onboard.step_log import BridgeViz
     from controller.geodetic import geodetic_to_ned
     from scenarios.loop.controllers import NmpcController
     from scenarios.results.mcap_log import TOPICS, VizOptions

@@ -5,19 +5,14 @@ own .BIN), the fence and the failsafes."""
 from __future__ import annotations
 
 import csv
-import io
+import itertools
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from bridge.autopilot_sim import AutopilotSim
-from bridge.clock import VirtualClock
-from bridge.link import AutopilotLink
-from bridge.lossy_relay import LossyRelay
-from bridge.mavlink_plant import free_udp_port
-from bridge.onboard import EXIT_GOAL, EXIT_STOPPED, BridgeOptions
-from bridge.onboard_maneuvers import ManeuverSession, coast_distance_m
+from bridge.onboard.loop import EXIT_GOAL, EXIT_STOPPED, BridgeOptions
+from bridge.onboard.maneuvers import ManeuverSession, coast_distance_m
 from controller.identification.dataflash import read_dataflash
 from controller.identification.log_runs import Window, cut_windows, find_runs
 from controller.identification.logs import read_log
@@ -56,49 +51,25 @@ def lake():
     return parse_scenario(LAKE, "lake.toml")
 
 
-class Boat:
-    """The simulated autopilot (DataFlash log on) <- (relay) -> a link, on a virtual clock."""
-
-    def __init__(self, scenario, tmp_path, seed=1, relay=False, tick_s=0.02):
-        self.clock = VirtualClock(tick_s)  # 50 Hz: the autopilot's logging rate for RCOU
-        port = free_udp_port()
-        self.autopilot = AutopilotSim(scenario, f"udpin:127.0.0.1:{port}", self.clock, seed=seed,
-                                      ekf_delay_s=5.0, init_s=2.0, work_dir=tmp_path / "work",
-                                      log_dir=tmp_path / "logs", physics_step_s=tick_s)
-        self.clock.add_peer(self.autopilot.pump)
-        self.relay = None
-        if relay:
-            self.relay = LossyRelay(("127.0.0.1", port), self.clock, seed=seed)
-            self.clock.add_peer(self.relay.pump)
-            port = self.relay.port
-        self.link = AutopilotLink(f"udpout:127.0.0.1:{port}", self.clock,
-                                  geodetic_origin=scenario.geodetic_origin)
-        self.console = io.StringIO()
-
-    def session(self, scenario, runs, out, **kwargs):
-        return ManeuverSession(self.link, scenario, runs,
-                               BridgeOptions(mode="MANUAL", arm=True, ekf_timeout_s=30.0), out,
-                               console=self.console, **kwargs)
-
-    def close(self):
-        self.link.close()
-        if self.relay is not None:
-            self.relay.close()
-        self.autopilot.close()
-
-
 @pytest.fixture
-def boat(lake, tmp_path):
-    made = []
+def boat(lake, sim_rig, tmp_path):
+    """Factory: the simulated autopilot (DataFlash log on) <- (relay) -> a link on a virtual
+    clock at 50 Hz, the autopilot's logging rate for RCOU (tests/bridge/rigs.py)."""
+    made = itertools.count()
 
-    def make(**kwargs):
-        b = Boat(lake, tmp_path / f"boat{len(made)}", **kwargs)
-        made.append(b)
-        return b
+    def make(seed=1, relay=False, tick_s=0.02):
+        return sim_rig(lake, seed=seed, relay=relay, tick_s=tick_s, ekf_delay_s=5.0, init_s=2.0,
+                       log_dir=tmp_path / f"logs{next(made)}", physics_step_s=tick_s,
+                       link_kwargs={"geodetic_origin": lake.geodetic_origin})
 
-    yield make
-    for b in made:
-        b.close()
+    return make
+
+
+def start_session(b, scenario, runs, out, **kwargs):
+    """A manoeuvre session on the rig's link, MANUAL and armed, its console the rig's."""
+    return ManeuverSession(b.link, scenario, runs,
+                           BridgeOptions(mode="MANUAL", arm=True, ekf_timeout_s=30.0), out,
+                           console=b.console, **kwargs)
 
 
 @pytest.mark.slow  # about 35 s: two sessions of manoeuvres on the simulated autopilot
@@ -108,7 +79,7 @@ def test_a_staircase_and_a_zigzag_logged_twice_the_same(boat, lake, tmp_path):
     b = boat()
     runs = (SurgeRun("01_acceleration", "acceleration", (31.0, 50.6), lead_in_s=3.0),
             ZigzagRun("02_zigzag_20_50", 20.0, 50.0, 42.0, overshoots=2))
-    result = b.session(lake, runs, tmp_path / "out", hold_s=12.0).run()
+    result = start_session(b, lake, runs, tmp_path / "out", hold_s=12.0).run()
     assert result.exit_code == EXIT_GOAL and result.reason == "manoeuvres done", result
     acc, zig = (read_log(p) for p in result.paths)
     assert acc.meta["maneuver"] == "acceleration" and zig.meta["maneuver"] == "zigzag"
@@ -144,7 +115,7 @@ def test_a_staircase_and_a_zigzag_logged_twice_the_same(boat, lake, tmp_path):
 def test_a_run_that_would_leave_the_radius_is_cut_short(boat, lake, tmp_path):
     b = boat()
     runs = (SurgeRun("01_acceleration", "acceleration", (50.6,), lead_in_s=2.0),)
-    result = b.session(lake, runs, tmp_path / "out", hold_s=60.0, radius_m=60.0).run()
+    result = start_session(b, lake, runs, tmp_path / "out", hold_s=60.0, radius_m=60.0).run()
     assert result.exit_code == EXIT_GOAL
     (record,) = result.runs
     assert record.cut_short.startswith("coasting from") and "leave the radius" in record.cut_short
@@ -160,7 +131,7 @@ def test_a_run_that_would_leave_the_radius_is_cut_short(boat, lake, tmp_path):
 def test_the_link_lost_mid_run_fails_safe(boat, lake, tmp_path):
     b = boat(relay=True)
     runs = (SurgeRun("01_acceleration", "acceleration", (31.0, 41.0), lead_in_s=2.0),)
-    session = b.session(lake, runs, tmp_path / "out", hold_s=20.0)
+    session = start_session(b, lake, runs, tmp_path / "out", hold_s=20.0)
     cut = []
 
     def script(now):  # 3 s into the run
@@ -185,7 +156,7 @@ def test_a_loop_behind_the_clock_keeps_the_manoeuvre_timing_and_says_so(boat, la
     steps are counted and reported."""
     b = boat()
     runs = (ZigzagRun("01_zigzag_20_50", 20.0, 50.0, 42.0, overshoots=1),)
-    session = b.session(lake, runs, tmp_path / "out", hold_s=2.0)
+    session = start_session(b, lake, runs, tmp_path / "out", hold_s=2.0)
     send = b.link.send_commands
 
     def slow_send(*cmd):

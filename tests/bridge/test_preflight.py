@@ -6,9 +6,9 @@ from dataclasses import replace
 
 import pytest
 
-from bridge import preflight
-from bridge.ardupilot import DEFAULT_PARAMS, MODES
-from bridge.link import Heartbeat
+from bridge.onboard import preflight
+from bridge.shared.ardupilot import DEFAULT_PARAMS, MODES
+from bridge.onboard.link import Heartbeat
 
 HB = Heartbeat(system_id=1, component_id=1, type=11, autopilot=3, base_mode=1,
                custom_mode=MODES["MANUAL"], system_status=4, received_s=0.0)

@@ -9,19 +9,13 @@ simulated autopilot that now boots and behaves like it, in lock-step on a virtua
 
 from __future__ import annotations
 
-import io
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from bridge.autopilot_sim import AutopilotSim
-from bridge.clock import VirtualClock
-from bridge.link import AutopilotLink
-from bridge.lossy_relay import LossyRelay
-from bridge.mavlink_plant import free_udp_port
-from bridge.onboard import BridgeOptions, prepare_link
+from bridge.onboard.loop import BridgeOptions
 from scenarios.scenario_file import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -35,57 +29,23 @@ def straight():
     return replace(s, geodetic_origin=ORIGIN)
 
 
-class Rig:
-    """Simulated autopilot <- (relay) -> bridge link, on one virtual clock."""
-
-    def __init__(self, scenario, tmp_path, *, latency_s=0.0, loss=0.0, init_s=3.0,
-                 ekf_delay_s=5.0, seed=4, params=None):
-        self.clock = VirtualClock(0.01)
-        port = free_udp_port()
-        self.autopilot = AutopilotSim(scenario, f"udpin:127.0.0.1:{port}", self.clock,
-                                      seed=seed, ekf_delay_s=ekf_delay_s, init_s=init_s,
-                                      work_dir=tmp_path, params=params)
-        self.clock.add_peer(self.autopilot.pump)
-        self.relay = None
-        if latency_s or loss:
-            self.relay = LossyRelay(("127.0.0.1", port), self.clock, latency_s=latency_s,
-                                    loss=loss, seed=seed)
-            self.clock.add_peer(self.relay.pump)
-            port = self.relay.port
-        self.link = AutopilotLink(f"udpout:127.0.0.1:{port}", self.clock)
-        self.scenario = scenario
-        self.console = io.StringIO()
-
-    def prepare(self, **options):
-        options = {"mode": "MANUAL", "arm": True, "ekf_timeout_s": 30.0, **options}
-        return prepare_link(self.link, self.scenario, BridgeOptions(**options), self.console)
-
-    def command(self, nT, nS, seconds=0.3):
-        """Send (nT, nS) every 0.1 s for `seconds`; the autopilot's outputs at the end."""
-        for _ in range(int(round(seconds / 0.1))):
-            self.link.send_commands(nT, nS)
-            self.link.wait_until(lambda: False, 0.1)
-        return self.autopilot.outputs
-
-    def close(self):
-        self.link.close()
-        if self.relay is not None:
-            self.relay.close()
-        self.autopilot.close()
-
-
 @pytest.fixture
-def rig(straight, tmp_path):
-    made = []
+def rig(straight, sim_rig):
+    """Simulated autopilot <- (relay) -> bridge link (tests/bridge/rigs.py), booting as Rover
+    does (3 s) with its first GPS fix at 5 s."""
 
-    def make(scenario=straight, **kwargs):
-        r = Rig(scenario, tmp_path / f"rig{len(made)}", **kwargs)
-        made.append(r)
-        return r
+    def make(scenario=straight, *, seed=4, init_s=3.0, ekf_delay_s=5.0, **kwargs):
+        return sim_rig(scenario, seed=seed, init_s=init_s, ekf_delay_s=ekf_delay_s, **kwargs)
 
-    yield make
-    for r in made:
-        r.close()
+    return make
+
+
+def command(r, nT, nS, seconds=0.3):
+    """Send (nT, nS) every 0.1 s for `seconds`; the autopilot's outputs at the end."""
+    for _ in range(int(round(seconds / 0.1))):
+        r.link.send_commands(nT, nS)
+        r.link.wait_until(lambda: False, 0.1)
+    return r.autopilot.outputs
 
 
 # -- 2. the frame is the world's ---------------------------------------------------------------
@@ -93,7 +53,7 @@ def test_positions_are_the_worlds_whatever_the_ekf_origin(rig, straight):
     """The boat moves (1 m/s) before its first fix at 5 s: the EKF origin is ~5 m along the
     canal. Placed on the Earth through the geodetic origin, the bridge's state is the truth;
     without an origin it refuses, saying how to give one."""
-    from bridge.ardupilot import SITL_DEFAULT_HOME
+    from bridge.shared.ardupilot import SITL_DEFAULT_HOME
     from controller.errors import InputError
 
     no_origin = replace(straight, geodetic_origin=None)  # the simulator puts it at SITL's home
@@ -153,7 +113,7 @@ def test_throttle_reaches_the_autopilot_as_the_whole_percent_meant(rig):
     r = rig()
     r.prepare()
     for nT in (31.0, 34.9, 38.6, 41.0, 50.6, 39.4, 20.0, 42.0, 7.5, 0.7, -12.3, -99.6):
-        out_nT, _ = r.command(nT, 0.0, seconds=0.2)
+        out_nT, _ = command(r, nT, 0.0, seconds=0.2)
         meant = float(np.sign(nT) * np.floor(abs(nT) + 0.5))
         assert out_nT == meant, (nT, out_nT)
 
@@ -168,9 +128,9 @@ def test_rc_parameters_are_read_after_start_up_so_small_steering_moves_the_rudde
     # a 2 % correction either way reaches the autopilot (it is within trim +- 30 us if the
     # dead zone is not known: 2 % of 400 us is 8 us)
     for nS in (2.0, -2.0):
-        nT_out, nS_out = r.command(20.0, nS)
+        nT_out, nS_out = command(r, 20.0, nS)
         assert nS_out == pytest.approx(nS, abs=0.3), (nS, nS_out)
-    assert r.command(20.0, 100.0)[1] == pytest.approx(100.0)  # the largest stays at the end
+    assert command(r, 20.0, 100.0)[1] == pytest.approx(100.0)  # the largest stays at the end
 
 
 class Constant:
@@ -194,8 +154,8 @@ class NoLidar:
 
 def run_loop(r, tmp_path, controller, at_steps=None, **options):
     """The onboard loop on the rig; `at_steps` = {step: action(rig)} applied as it runs."""
-    from bridge.onboard import OnboardLoop
-    from bridge.step_log import StepLog
+    from bridge.onboard.loop import OnboardLoop
+    from bridge.onboard.step_log import StepLog
 
     log = StepLog(tmp_path)
     options = {"mode": "MANUAL", "arm": True, "ekf_timeout_s": 30.0, "duration_s": 8.0, **options}

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from bridge.main import build_parser, main
-from bridge.sitl_json import (
+from bridge.sitl.json_physics import (
     Rejected,
     ServoPacket,
     SitlPhysicsServer,
@@ -198,7 +198,7 @@ def test_parses_16_and_32_channel_packets():
 def test_bad_datagrams_are_ignored_with_one_warning_per_kind(server, caplog, datagram, kind):
     rejected = parse_servo_packet(datagram)
     assert isinstance(rejected, Rejected) and rejected.kind == kind
-    with caplog.at_level(logging.WARNING, logger="bridge.sitl_json"):
+    with caplog.at_level(logging.WARNING, logger="bridge.sitl.json_physics"):
         for _ in range(20):
             assert server.handle(datagram, ("127.0.0.1", 40000)) is None
     warnings = [r for r in caplog.records if r.levelno == logging.WARNING]
@@ -269,7 +269,7 @@ def test_frame_count_going_back_resets_the_boat(server, caplog):
     moved = run_frames(server, 501, throttle=1900, steer=1700)  # throttle ramps at 10 %/s
     assert moved["timestamp"] == pytest.approx(10.0)
     assert np.hypot(*(moved["position"][:2] - [5.0, -3.0])) > 1.0
-    with caplog.at_level(logging.WARNING, logger="bridge.sitl_json"):
+    with caplog.at_level(logging.WARNING, logger="bridge.sitl.json_physics"):
         r = sitl_reads(server.handle(servo_packet(0, throttle=1900)))
     assert "restarted" in caplog.text and server.restarts == 1
     assert r["timestamp"] == 0.0
@@ -287,7 +287,7 @@ def test_a_jump_forward_steps_over_the_missing_frames(sc, caplog):
     s = SitlPhysicsServer(sc, plant=plant)
     s.handle(servo_packet(0, rate=100))
     s.handle(servo_packet(1, rate=100))
-    with caplog.at_level(logging.WARNING, logger="bridge.sitl_json"):
+    with caplog.at_level(logging.WARNING, logger="bridge.sitl.json_physics"):
         r = sitl_reads(s.handle(servo_packet(5, rate=100)))
     assert r["timestamp"] == pytest.approx(0.05) and plant.steps == 2
     assert "jumped from 1 to 5" in caplog.text
@@ -383,7 +383,7 @@ def test_udp_lock_step_with_a_fake_sitl(server, caplog):
         assert again == reply and server.frames == 100
         assert sitl_reads(reply)["timestamp"] == pytest.approx(2.0)
         # garbage gets no answer, and the next frame is still answered
-        with caplog.at_level(logging.WARNING, logger="bridge.sitl_json"):
+        with caplog.at_level(logging.WARNING, logger="bridge.sitl.json_physics"):
             sitl.send(b"\x00" * 12)
             assert sitl.receive(timeout=0.3) is None
         assert "bad magic" in caplog.text or "magic 0" in caplog.text

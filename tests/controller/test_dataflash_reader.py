@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from bridge.dataflash_log import DataFlashWriter
+from bridge.autopilot_sim.dataflash import DataFlashWriter
 from controller.errors import InputError
 from controller.geodetic import ned_to_geodetic
 from controller.identification.dataflash import read_dataflash

@@ -1,4 +1,5 @@
-"""MAVLink 2 signing keys from a file, one rule for the bridge and the simulated autopilot.
+"""MAVLink 2 signing keys from a file, and how a message failing them is counted: one rule for
+the bridge and the simulated autopilot.
 
 The file holds either exactly 32 bytes (the key itself), or 64 hexadecimal characters (the
 key in hex), or any other text: a passphrase whose SHA-256 is the key, as MAVProxy's
@@ -50,3 +51,15 @@ def load_signing_key(path: str | Path) -> bytes:
 def rejected_for_signature(bad_data_msg) -> bool:
     """Whether pymavlink's BAD_DATA stands for a missing or wrong signature (not garbage)."""
     return "signature" in str(getattr(bad_data_msg, "reason", "")).lower()
+
+
+def counted_as_bad_data(msg, counters) -> bool:
+    """Whether `msg` is pymavlink's BAD_DATA; if so it is counted on `counters` (both ends'
+    LinkCounters) as a rejected signature or as garbage."""
+    if msg.get_type() != "BAD_DATA":
+        return False
+    if rejected_for_signature(msg):
+        counters.rejected_signature += 1
+    else:
+        counters.bad_data += 1
+    return True

@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from .dataflash_log import DataFlashWriter, next_log_path
+from .dataflash import DataFlashWriter, next_log_path
 
 RATES_HZ = {"rc": 50.0, "ekf": 25.0, "gps": 5.0}
 FLUSH_S = 1.0

@@ -18,11 +18,11 @@ What is simulated, as ArduPilot Rover does it:
   message is answered with a COMMAND_ACK for command 11, as ArduPilot does.
 - RC_CHANNELS_OVERRIDE addressed to our system id from the GCS sysid (MAV_GCS_SYSID /
   SYSID_MYGCS) only, per-channel release/ignore values, RC_OPTIONS, RC_OVERRIDE_TIME
-  (see `autopilot_rc`). Any other message is answered whoever sends it, as ArduPilot does.
-- Streams (defaults in `autopilot_streams.DEFAULT_INTERVALS`): HEARTBEAT, SYS_STATUS and
+  (see `rc`). Any other message is answered whoever sends it, as ArduPilot does.
+- Streams (defaults in `streams.DEFAULT_INTERVALS`): HEARTBEAT, SYS_STATUS and
   EKF_STATUS_REPORT at 1 Hz; ATTITUDE, LOCAL_POSITION_NED, GLOBAL_POSITION_INT at 4 Hz;
   RC_CHANNELS and SERVO_OUTPUT_RAW off. A reboot forgets requested rates.
-- The EKF (`autopilot_ekf`): attitude only until `ekf_delay_s` after boot (the first GPS
+- The EKF (`ekf`): attitude only until `ekf_delay_s` after boot (the first GPS
   fix; never before start-up is over), then position and velocity; LOCAL_POSITION_NED and
   GLOBAL_POSITION_INT are sent only once the position is valid. The scenario's (0, 0) is on
   the Earth at its `[origin]` (else at ArduPilot SITL's default home, as SITL puts it);
@@ -57,7 +57,6 @@ from __future__ import annotations
 
 import math
 import select
-import tempfile
 from collections import deque
 from dataclasses import dataclass
 
@@ -65,14 +64,15 @@ import numpy as np
 
 from controller.errors import InputError
 
-from . import ardupilot
-from . import autopilot_streams as st
-from .autopilot_ekf import EkfModel
+from bridge.shared import ardupilot
+from . import streams as st
+from .ekf import EkfModel
 from controller.geodetic import geodetic_to_ned, ned_to_geodetic  # both ends agree
-from .autopilot_params import ParamTable, param_id
-from .autopilot_rc import UINT16_MAX, RcInput
+from .params import ParamTable, param_id
+from .rc import UINT16_MAX, RcInput
 from controller.pwm import CommandChannels
-from .signing import rejected_for_signature
+from bridge.shared.boat_physics import BoatPhysics
+from bridge.shared.signing import counted_as_bad_data
 
 COMPONENT_ID = 1  # MAV_COMP_ID_AUTOPILOT1
 PARAMS_PER_PUMP = 20  # PARAM_REQUEST_LIST answers are spread over pumps, as ArduPilot's queue
@@ -183,13 +183,11 @@ class AutopilotSim:
         self._streams = st.Streams()
         self.counters = LinkCounters()
         self.received_statustext: list[str] = []
-        self._tmp = None
-        self._plant = None
+        self._physics = None
         self._conn = None
         self._log = None
         try:
-            self._plant = self._build_plant(work_dir)
-            self.last_plant_output = self._plant.reset(scenario.initial_state, scenario.current_ne)
+            self._physics = BoatPhysics(scenario, work_dir, tmp_prefix="canalnav-autopilot-")
             self._conn = open_connection(url, self._sysid)
             self._datagrams = _is_datagram(self._conn)
             if signing_key is not None:
@@ -202,22 +200,12 @@ class AutopilotSim:
         self._steps = 0
         self._outputs = (0.0, 0.0)
         if log_dir is not None:
-            from .autopilot_log import AutopilotLog
+            from .log import AutopilotLog
 
             self._log = AutopilotLog(log_dir)
         self._boot(0.0)
 
     # -- construction ---------------------------------------------------------------------
-    def _build_plant(self, work_dir):
-        from scenarios.plants.fmu import FmuPlant
-        from scenarios.plants.plant import ActuatorLimits
-
-        if work_dir is None:
-            self._tmp = tempfile.TemporaryDirectory(prefix="canalnav-autopilot-")
-            work_dir = self._tmp.name
-        return FmuPlant(self.scenario.plant_params, ActuatorLimits(*self.scenario.actuator_rates),
-                        work_dir)
-
     def _build_servos(self) -> CommandChannels:
         try:
             return CommandChannels.from_servo_params(self._params.values)
@@ -260,6 +248,11 @@ class AutopilotSim:
                          severity=6)
 
     # -- public state -----------------------------------------------------------------------
+    @property
+    def last_plant_output(self):
+        """The boat's last step (scenarios.plants.plant.PlantOutput: the truth)."""
+        return self._physics.output
+
     @property
     def true_state(self) -> np.ndarray:
         return self.last_plant_output.state.copy()
@@ -317,7 +310,7 @@ class AutopilotSim:
 
     @property
     def estimate(self):
-        """The EKF's estimate now (autopilot_ekf.Estimate, in the scenario's frame)."""
+        """The EKF's estimate now (ekf.Estimate, in the scenario's frame)."""
         return self._estimate()
 
     def geodetic_position(self, e) -> tuple[float, float]:
@@ -429,14 +422,11 @@ class AutopilotSim:
             except OSError:
                 pass
             self._conn = None
-        if self._plant is not None:
-            self._plant.close()
-            self._plant = None
+        if self._physics is not None:
+            self._physics.close()
+            self._physics = None
         if self._log is not None:
             self._log.close()
-        if self._tmp is not None:
-            self._tmp.cleanup()
-            self._tmp = None
 
     def __enter__(self):
         return self
@@ -448,7 +438,7 @@ class AutopilotSim:
     def _advance(self, t_target: float) -> None:
         n = math.floor(t_target / self.physics_step_s + 1e-6)
         while self._steps < n:
-            self.last_plant_output = self._plant.step(self.actuator_commands, self.physics_step_s)
+            self._physics.step(self.actuator_commands, self.physics_step_s)
             self._ekf.step(self.physics_step_s)
             self._steps += 1
 
@@ -523,13 +513,9 @@ class AutopilotSim:
         self._handle(msg)
 
     def _handle(self, msg) -> None:
-        kind = msg.get_type()
-        if kind == "BAD_DATA":
-            if rejected_for_signature(msg):
-                self.counters.rejected_signature += 1
-            else:
-                self.counters.bad_data += 1
+        if counted_as_bad_data(msg, self.counters):
             return
+        kind = msg.get_type()
         self.counters.messages += 1
         handler = self._HANDLERS.get(kind)
         if handler is None:

@@ -12,7 +12,7 @@ import math
 
 from controller.errors import InputError, finite_number
 
-from . import ardupilot
+from bridge.shared import ardupilot
 
 NAME_LEN = 16  # PARAM_VALUE.param_id is 16 characters, not NUL-terminated when full
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from . import ardupilot
+from bridge.shared import ardupilot
 
 N_CHANNELS = 18  # RC_CHANNELS_OVERRIDE carries 18; ArduPilot has 16 RCn_ parameter sets
 UINT16_MAX = ardupilot.OVERRIDE_IGNORE

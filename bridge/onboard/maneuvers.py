@@ -38,7 +38,7 @@ import numpy as np
 from controller.errors import CanalnavError, InputError
 from controller.geometry import wrap_angle
 
-from bridge.onboard import (EXIT_GOAL, EXIT_INTERRUPTED, EXIT_STOPPED, MAV_SEVERITY_CRITICAL,
+from bridge.onboard.loop import (EXIT_GOAL, EXIT_INTERRUPTED, EXIT_STOPPED, MAV_SEVERITY_CRITICAL,
                             MAV_SEVERITY_INFO, MAV_SEVERITY_WARNING, BridgeOptions, link_fault,
                             prepare_link, safe_stop)
 
@@ -137,7 +137,7 @@ class ManeuverSession:
 
     # -- the session ----------------------------------------------------------------------
     def run(self) -> SessionResult:
-        from bridge.onboard import PreflightRefused
+        from bridge.onboard.loop import PreflightRefused
 
         self.out_dir.mkdir(parents=True, exist_ok=True)
         try:
@@ -416,7 +416,7 @@ class ManeuverSession:
         return st
 
     def _param_fault(self) -> str | None:
-        from bridge import preflight
+        from bridge.onboard import preflight
 
         changes = self.link.pop_param_changes()
         for c in changes:
@@ -509,9 +509,9 @@ class ManeuverSession:
 
 def run_on_boat(args, console=sys.stderr) -> int:
     """`canalnav maneuvers --connect URL --scenario FILE -o DIR`: wire it up and run."""
-    from bridge.clock import RealClock
-    from bridge.link import AutopilotLink
-    from bridge.onboard import geodetic_origin, parse_origin
+    from bridge.shared.clock import RealClock
+    from bridge.onboard.link import AutopilotLink
+    from bridge.onboard.loop import geodetic_origin, parse_origin
     from controller.identification.maneuvers import PAPER_RUNS, QUICK_RUNS, with_overshoots
     from scenarios.scenario_file import load_scenario
 
@@ -532,7 +532,7 @@ def run_on_boat(args, console=sys.stderr) -> int:
                            getattr(args, "overshoots", None))
     key = None
     if args.signing_key:
-        from bridge.signing import load_signing_key
+        from bridge.shared.signing import load_signing_key
 
         key = load_signing_key(args.signing_key)
     out = Path(args.out)

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bridge.ardupilot import SITL_DEFAULT_HOME
-from bridge.clock import VirtualClock
+from bridge.shared.ardupilot import SITL_DEFAULT_HOME
+from bridge.shared.clock import VirtualClock
 from scenarios.plants.plant import PlantFailure, PlantOutput
 
 OVERRIDE_PERIOD_S = 0.1  # overrides go out at the control rate (and whenever they change)
@@ -52,9 +52,9 @@ class MavlinkSimPlant:
     def __init__(self, scenario, out_dir, *, faults: LinkFaults = LinkFaults(),
                  ekf_delay_s: float = 5.0, signing_key: bytes | None = None,
                  tick_s: float = 0.01):
-        from bridge.autopilot_sim import AutopilotSim
-        from bridge.link import AutopilotLink
-        from bridge.lossy_relay import LossyRelay
+        from bridge.autopilot_sim.rover import AutopilotSim
+        from bridge.onboard.link import AutopilotLink
+        from bridge.autopilot_sim.lossy_relay import LossyRelay
 
         self.scenario = scenario
         self.out_dir = Path(out_dir) if out_dir is not None else Path(tempfile.mkdtemp())
@@ -83,7 +83,7 @@ class MavlinkSimPlant:
 
     def reset(self, state0, current_ne=(0.0, 0.0)) -> PlantOutput:
         """Handshake, pre-flight checks, EKF wait, MANUAL and arming, as `canalnav bridge`."""
-        from bridge.onboard import BridgeOptions, prepare_link
+        from bridge.onboard.loop import BridgeOptions, prepare_link
 
         if not np.allclose(state0, self.autopilot.true_state, atol=1e-9) or \
                 not np.allclose(current_ne, self.scenario.current_ne):
@@ -110,7 +110,7 @@ class MavlinkSimPlant:
         return self._output()
 
     def _output(self) -> PlantOutput:
-        from bridge.ekf_state import predict_vector
+        from bridge.onboard.ekf_state import predict_vector
 
         out = self.autopilot.last_plant_output
         st = self.link.state

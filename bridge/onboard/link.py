@@ -35,10 +35,10 @@ from pathlib import Path
 
 from controller.errors import CanalnavError, InputError
 
-from bridge.ardupilot import MODE_NAMES, MODES, OVERRIDE_IGNORE, OVERRIDE_RELEASE
-from bridge.boot_clock import BootClock
-from bridge.signing import rejected_for_signature
-from bridge.ekf_state import (EkfState, horizontal_position_ok, state_from_global,
+from bridge.shared.ardupilot import MODE_NAMES, MODES, OVERRIDE_IGNORE, OVERRIDE_RELEASE
+from bridge.onboard.boot_clock import BootClock
+from bridge.shared.signing import counted_as_bad_data
+from bridge.onboard.ekf_state import (EkfState, horizontal_position_ok, state_from_global,
                               state_from_local)
 from controller.geodetic import geodetic_to_ned
 
@@ -249,13 +249,9 @@ class AutopilotLink:
             return False
 
     def _handle(self, msg) -> int:
-        kind = msg.get_type()
-        if kind == "BAD_DATA":
-            if rejected_for_signature(msg):
-                self.counters.rejected_signature += 1
-            else:
-                self.counters.bad_data += 1
+        if counted_as_bad_data(msg, self.counters):
             return 0
+        kind = msg.get_type()
         self._log(msg.get_msgbuf(), sent=False)
         src = (msg.get_srcSystem(), msg.get_srcComponent())
         if self.target_component is None:
@@ -635,7 +631,7 @@ class AutopilotLink:
             whom = "an autopilot" if self.target_system is None else f"system {self.target_system}"
             raise LinkError(f"no heartbeat from {whom} on {self.url} within {timeout_s:g} s "
                             "(is the autopilot running? udpin listens, udpout sends first)")
-        from bridge.preflight import vehicle_refusals
+        from bridge.onboard.preflight import vehicle_refusals
 
         refused = vehicle_refusals(self.heartbeat)
         if refused:
@@ -646,7 +642,7 @@ class AutopilotLink:
         """Wait until the heartbeat says the autopilot is running: not MAV_STATE_UNINIT, BOOT
         or CALIBRATING, not in mode INITIALISING. ArduPilot answers MAVLink during its
         start-up but sets some parameters (Rover: the RC dead zones) only at its end."""
-        from bridge.ardupilot import MAV_STATE_STARTING, MODES
+        from bridge.shared.ardupilot import MAV_STATE_STARTING, MODES
 
         def running() -> bool:
             hb = self.heartbeat
@@ -734,7 +730,7 @@ class AutopilotLink:
         knows only one): both are asked, and the value is returned under both names.
         `optional` names are asked too but never waited for or retried alone.
         """
-        from bridge.ardupilot import PARAM_ALIASES
+        from bridge.shared.ardupilot import PARAM_ALIASES
 
         groups = []
         for name in dict.fromkeys(names):

@@ -9,7 +9,7 @@ to the servos.
 
 from __future__ import annotations
 
-from bridge.ardupilot import MODE_NAMES, MODES, PARAM_ALIASES, RC_OPTION_IGNORE_OVERRIDES
+from bridge.shared.ardupilot import MODE_NAMES, MODES, PARAM_ALIASES, RC_OPTION_IGNORE_OVERRIDES
 from controller.pwm import CommandChannels
 
 MAV_TYPE_GROUND_ROVER = 10

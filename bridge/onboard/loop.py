@@ -23,7 +23,7 @@ import numpy as np
 
 from controller.errors import CanalnavError, InputError
 
-from bridge.step_log import Step, StepLog, status_line
+from bridge.onboard.step_log import Step, StepLog, status_line
 
 EXIT_GOAL, EXIT_STOPPED, EXIT_REFUSED, EXIT_INTERRUPTED = 0, 1, 3, 130
 MAV_SEVERITY_CRITICAL, MAV_SEVERITY_WARNING, MAV_SEVERITY_INFO = 2, 4, 6
@@ -109,7 +109,7 @@ NO_ORIGIN = (
 
 def geodetic_origin(scenario, options: BridgeOptions):
     """The scenario's place on the Earth: --origin, else its [origin]; InputError if none."""
-    from bridge.ardupilot import SITL_DEFAULT_HOME
+    from bridge.shared.ardupilot import SITL_DEFAULT_HOME
 
     origin = options.origin or scenario.geodetic_origin
     if origin is None:
@@ -142,7 +142,7 @@ def parse_origin(text: str) -> tuple[float, float, float]:
 def _check_ekf_origin(link, options, console) -> None:
     """GPS_GLOBAL_ORIGIN: where the EKF origin is, and whether LOCAL_POSITION_NED moved by it
     agrees with GLOBAL_POSITION_INT (refused if not)."""
-    from bridge.link import FRAME_TOLERANCE_M
+    from bridge.onboard.link import FRAME_TOLERANCE_M
 
     origin = link.wait_ekf_origin(options.origin_timeout_s)
     if origin is None:
@@ -169,7 +169,7 @@ def _rc_summary(m) -> str:
 
 def _read_rc_params(link) -> dict:
     """The parameters the pre-flight checks and the RC mapping need, read until settled."""
-    from bridge import preflight
+    from bridge.onboard import preflight
 
     params = link.wait_params_settled(preflight.BASE_PARAMS + preflight.GCS_SYSID_NAMES,
                                       optional=(preflight.GCS_SYSID_HIGH,))
@@ -182,7 +182,7 @@ def prepare_link(link, scenario, options: BridgeOptions = BridgeOptions(), conso
     does them: heartbeat, past start-up, stream rates, RC parameters (read until settled),
     pre-flight checks, EKF position, the RC parameters again just before taking control, then
     the mode and arming if asked. Raises PreflightRefused (with reasons) or LinkError."""
-    from bridge import preflight
+    from bridge.onboard import preflight
     from controller.pwm import CommandChannels
 
     link.geodetic_origin = geodetic_origin(scenario, options)
@@ -367,7 +367,7 @@ class OnboardLoop:
     def _follow_params(self, t: float) -> str | None:
         """Log each parameter the autopilot reported changed (the link has applied it: the RC
         mapping follows); a change that makes the autopilot ignore us is a fault."""
-        from bridge import preflight
+        from bridge.onboard import preflight
 
         hb = self.link.heartbeat
         for _, notice in self.link.pop_notices():
@@ -391,7 +391,7 @@ class OnboardLoop:
 
     def _step(self, t: float) -> str | None:
         """One control period; returns a fault that calls for the failsafe, else None."""
-        from bridge.ekf_state import predict_vector
+        from bridge.onboard.ekf_state import predict_vector
 
         link = self.link
         state = link.state
@@ -488,7 +488,7 @@ class OnboardLoop:
     def _recover(self) -> BridgeResult | None:
         """--resume: wait for the link and state to come back, prepare again, continue.
         Returns a result if the run must end instead (time limit, refusal)."""
-        from bridge.link import LinkError
+        from bridge.onboard.link import LinkError
 
         blind = self._lidar_lost() is not None
         self._say("bridge: waiting for the link and the EKF state" + (" and a LiDAR sweep"
@@ -557,7 +557,7 @@ def _bridge_viz(options: BridgeOptions, log_dir, origin, scenario, console):
     if not mcap and options.live is None:
         return None
     require_viz()
-    from bridge.step_log import BridgeViz
+    from bridge.onboard.step_log import BridgeViz
     from scenarios.loop.runner import R_B_M
     from scenarios.results.mcap_log import VizOptions
     from scenarios.sensors.lidar import LidarConfig
@@ -574,10 +574,10 @@ def _bridge_viz(options: BridgeOptions, log_dir, origin, scenario, console):
 def run_bridge(options: BridgeOptions, console=sys.stderr) -> BridgeResult:
     """`canalnav bridge`: load the scenario, build the controller and LiDAR source, connect,
     prepare, run; the link and logs are closed whatever happens."""
-    from bridge.ardupilot import MODES
-    from bridge.clock import RealClock
+    from bridge.shared.ardupilot import MODES
+    from bridge.shared.clock import RealClock
     from bridge.lidar import build_lidar
-    from bridge.link import AutopilotLink
+    from bridge.onboard.link import AutopilotLink
     from scenarios.loop.controllers import NmpcController
     from scenarios.scenario_file import load_scenario
 
@@ -597,7 +597,7 @@ def run_bridge(options: BridgeOptions, console=sys.stderr) -> BridgeResult:
                       "scenario's [origin]")
     key = None
     if options.signing_key is not None:
-        from bridge.signing import load_signing_key
+        from bridge.shared.signing import load_signing_key
 
         key = load_signing_key(options.signing_key)
     lidar = build_lidar(options.lidar, options.lidar_config, scenario, options.seed)

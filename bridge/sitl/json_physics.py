@@ -27,17 +27,15 @@ import logging
 import math
 import socket
 import struct
-import tempfile
 import time
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from controller.errors import InputError
 
 from controller.pwm import CommandChannels, PwmChannel
+from bridge.shared.boat_physics import BoatPhysics
 
 log = logging.getLogger(__name__)
 
@@ -183,13 +181,7 @@ class SitlPhysicsServer:
         self.host, self.port = host, int(port)
         self.steering = servo_calibration(int(steering_channel))
         self.throttle = servo_calibration(int(throttle_channel))
-        self._tmp = None
-        if plant is None:
-            plant = self._default_plant(scenario, work_dir)
-        self.plant = plant
-        self.initial_state = np.asarray(scenario.initial_state, float).copy()
-        self.current_ne = tuple(float(c) for c in scenario.current_ne)
-        self._output = self.plant.reset(self.initial_state, self.current_ne)
+        self.physics = BoatPhysics(scenario, work_dir, plant=plant, tmp_prefix="canalnav-sitl-")
         self._last_count: int | None = None
         self._reply: bytes | None = None
         self._sender = None
@@ -202,22 +194,11 @@ class SitlPhysicsServer:
         self.rejected: Counter = Counter()  # kind -> count
         self._warned: set[str] = set()
 
-    def _default_plant(self, scenario, work_dir):
-        """The boat FMU with the scenario's plant parameters and actuator rates."""
-        from scenarios.plants.fmu import FmuPlant
-        from scenarios.plants.plant import ActuatorLimits
-
-        if work_dir is None:
-            self._tmp = tempfile.TemporaryDirectory(prefix="canalnav-sitl-")
-            work_dir = self._tmp.name
-        return FmuPlant(scenario.plant_params, ActuatorLimits(*scenario.actuator_rates),
-                        Path(work_dir))
-
     # -- the protocol, without sockets -----------------------------------------------------
     @property
     def output(self):
         """The plant's last output (scenarios.plants.plant.PlantOutput)."""
-        return self._output
+        return self.physics.output
 
     def handle(self, datagram: bytes, addr=None) -> bytes | None:
         """Answer one datagram from SITL: the reply bytes, or None for a packet to ignore."""
@@ -239,7 +220,7 @@ class SitlPhysicsServer:
             log.warning("SITL restarted (frame count %d after %d): the boat starts again "
                         "from the scenario's initial state", packet.frame_count, last)
             self.restarts += 1
-            self._output = self.plant.reset(self.initial_state, self.current_ne)
+            self.physics.reset()
             self.commands = (0.0, 0.0)
             last = None
         if last is not None:
@@ -250,9 +231,9 @@ class SitlPhysicsServer:
                                 "frame(s) with this frame's outputs")
             self.commands = pwm_to_commands(packet.pwm, self.steering, self.throttle)
             dt = (packet.frame_count - last) / packet.frame_rate
-            self._output = self.plant.step(self.commands, dt)
+            self.physics.step(self.commands, dt)
             self.frames += 1
-        out = self._output
+        out = self.physics.output
         self._last_count = packet.frame_count
         self._reply = encode_reply(physics_state(out.time_s, out.state, out.state_dot))
         return self._reply
@@ -311,12 +292,7 @@ class SitlPhysicsServer:
         if self._sock is not None:
             self._sock.close()
             self._sock = None
-        if self.plant is not None:
-            self.plant.close()
-            self.plant = None
-        if self._tmp is not None:
-            self._tmp.cleanup()
-            self._tmp = None
+        self.physics.close()
 
     def __enter__(self):
         return self
@@ -340,7 +316,7 @@ def sitl_command(parm_file: Path, port: int = DEFAULT_PORT, host: str = DEFAULT_
     scenario's geodetic origin, else SITL's own default (given explicitly, so that the
     bridge's `--origin` can match it).
     """
-    from bridge.ardupilot import SITL_DEFAULT_HOME
+    from bridge.shared.ardupilot import SITL_DEFAULT_HOME
 
     target = "127.0.0.1" if host in ("", "127.0.0.1") else host
     if target in ("0.0.0.0", "::"):
@@ -362,8 +338,8 @@ def bridge_command(scenario_file, geodetic_origin: tuple | None) -> str:
     """The `canalnav bridge` command that drives that SITL through the MAVProxy output
     sim_vehicle.py opens on udp 14550, in the frame SITL's home puts the scenario in: a
     scenario without [origin] needs `--origin` at SITL's default home."""
-    from bridge.ardupilot import SITL_DEFAULT_HOME
-    from bridge.onboard import format_origin
+    from bridge.shared.ardupilot import SITL_DEFAULT_HOME
+    from bridge.onboard.loop import format_origin
 
     parts = ["canalnav bridge --connect udp:127.0.0.1:14550", f"--scenario {scenario_file}"]
     if geodetic_origin is None:
