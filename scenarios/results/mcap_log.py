@@ -8,7 +8,7 @@ are the run's clock (simulation seconds, or the bridge's), so a scrub in the vie
 with the rows of log.csv / steps.csv. The messages are built in `foxglove_messages`.
 
 `LoopViz` is the closed loop's use of it (`scenarios.loop.closed_loop`); the bridge has its
-own in `bridge.step_log`. Needs the `viz` extra (`pip install 'canalnav[viz]'`).
+own in `bridge.onboard.step_log`. Needs the `viz` extra (`pip install 'canalnav[viz]'`).
 """
 
 from __future__ import annotations
