@@ -85,7 +85,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from scenarios.loop.closed_loop import terminal_events, terminal_progress
+    from scenarios.loop.closed_loop import log_progress, terminal_events, terminal_progress
     from scenarios.loop.runner import check_criteria, run_scenario
 
     scenario = load_with_overrides(args.scenario, args.set)
@@ -95,14 +95,17 @@ def run(args) -> int:
         scenario = with_water(scenario, args.water)
     controller = args.controller or scenario.controller
     out = Path(args.out or f"runs/{scenario.name}-{controller}")
-    progress = terminal_progress() if sys.stderr.isatty() else None
+    tty = sys.stderr.isatty()  # a bar redrawn in a terminal, else a line every 5 s
+    progress = terminal_progress() if tty else log_progress()
     live = viz_request(args)
     result = run_scenario(scenario, out, controller=controller, seed=args.seed,
                           plant=args.plant, plots=not args.no_plots, progress=progress,
                           parallel_perception=False if args.serial_perception else None,
-                          events=terminal_events(progress is not None), mcap=args.mcap,
-                          live=live, cloud_points=args.mcap_points)
-    if progress:
+                          events=terminal_events(tty), mcap=args.mcap,
+                          live=live, cloud_points=args.mcap_points,
+                          invocation={"command_line": " ".join(sys.argv[1:]) or None,
+                                      "overrides": [f"{p}={v!r}" for p, v in args.set]})
+    if tty:
         sys.stderr.write("\n")
     s, t = result.summary, result.timing
     print(json.dumps(s, indent=2))

@@ -426,6 +426,31 @@ def terminal_progress(stream=sys.stderr) -> Callable[[float, float], None]:
     return show
 
 
+def log_progress(stream=None, every_s: float = 5.0,
+                 clock=time.perf_counter) -> Callable[[float, float], None]:
+    """A progress line every `every_s` of wall time, for a log rather than a terminal (a CI
+    job, a batch script, `| tee`): the share done, the simulated time, the wall time so far
+    and the time left at the pace so far."""
+    start = clock()
+    last = [start]
+
+    def show(t: float, total: float) -> None:
+        now = clock()
+        done = t >= total
+        if now - last[0] < every_s and not done:
+            return
+        last[0] = now
+        frac = min(1.0, t / total) if total > 0 else 1.0
+        spent = now - start
+        left = spent * (1.0 - frac) / frac if frac > 0 else float("nan")
+        out = stream or sys.stderr  # (looked up now: a redirected stderr is the one used)
+        out.write(f"run: {100 * frac:3.0f} % ({t:.1f} of {total:.0f} s simulated), "
+                  f"{spent:.0f} s so far, about {left:.0f} s left\n")
+        out.flush()
+
+    return show
+
+
 def terminal_events(redraw: bool, stream=sys.stderr) -> Callable[[float, str], None]:
     """Print what the controller starts or stops waiting for, one line each (below the
     progress bar when there is one)."""

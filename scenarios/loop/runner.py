@@ -7,6 +7,8 @@ never imports `bridge`.
 
 from __future__ import annotations
 
+import json
+
 from pathlib import Path
 from typing import Callable
 
@@ -125,14 +127,16 @@ def run_scenario(scenario: Scenario, out_dir: Path, controller: str | None = Non
                  seed: int | None = None, plant: str = "fmu", plots: bool = True,
                  progress=None, parallel_perception: bool | None = None,
                  events=None, mcap: bool | None = False, live=None,
-                 cloud_points: int | None = None) -> RunResult:
+                 cloud_points: int | None = None, invocation: dict | None = None) -> RunResult:
     """Run one scenario into `out_dir` (log.csv, summary.json, timing.json, PNG plots, and
     run.mcap). `parallel_perception` changes the wall time only, never the results;
     `events(t, text)` hears when the controller starts or stops waiting. `mcap`: write
     run.mcap (default no, as studies and tests want; None: when the viz extra is installed,
     as `canalnav run` asks; True without it: InputError naming it);
     `live` (host, port): serve the run to Foxglove over WebSocket; `cloud_points`: points per
-    LiDAR cloud in both (0: none). None of these changes the results."""
+    LiDAR cloud in both (0: none). None of these changes the results. `invocation`: how the
+    run was asked for (`canalnav run` gives its command line and --set overrides), kept in
+    summary.json so that a result says how to make it again."""
     if plant not in PLANTS:
         raise InputError(f"plant {plant!r} is not available (choose from: {', '.join(PLANTS)})")
     if scenario.current_profile is not None and plant not in ("fmu", "python-model"):
@@ -177,6 +181,9 @@ def run_scenario(scenario: Scenario, out_dir: Path, controller: str | None = Non
         the_plant.close()
         _close(perception)
         _close(viz)
+    if invocation:
+        result.summary["invocation"] = dict(invocation)
+        (out_dir / "summary.json").write_text(json.dumps(result.summary, indent=2) + "\n")
     if plots:
         from scenarios.results import plots as p
 
