@@ -163,6 +163,8 @@ def _load_library(build: HpipmBuild, directory: Path) -> tuple[ctypes.CDLL, bool
                                                          ctypes.c_int, ctypes.c_double,
                                                          ctypes.c_double, ctypes.c_int,
                                                          ctypes.c_double, ctypes.c_double]
+    lib.nmpc_qp_soft_weights.restype = None
+    lib.nmpc_qp_soft_weights.argtypes = [ctypes.c_void_p, _c_double_p, _c_double_p]
     lib.nmpc_qp_slack.restype = ctypes.c_void_p
     lib.nmpc_qp_slack.argtypes = [ctypes.c_void_p]
     lib.nmpc_qp_bind.restype = None
@@ -235,6 +237,12 @@ class HpipmOcpQp:
             setattr(self, name, theirs)
         self.lib.nmpc_qp_bind(self._handle, *(_ptr(getattr(self, n)) for n in names),
                               self.info.ctypes.data_as(_c_int_p), _ptr(self.res))
+
+    def soft_weights(self, l1, l2) -> None:
+        """Per-row penalties of the soft rows (ng each, the same at every stage)."""
+        l1 = np.ascontiguousarray(l1, float).reshape(self.ng)
+        l2 = np.ascontiguousarray(l2, float).reshape(self.ng)
+        self.lib.nmpc_qp_soft_weights(self._handle, _ptr(l1), _ptr(l2))
 
     def set(self, what: int, first: int = 0, stop: int | None = None) -> None:
         """Copy the groups `what` (SET_ flags, summed) of stages first..stop-1 into the QP."""

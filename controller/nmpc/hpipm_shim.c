@@ -248,6 +248,21 @@ int nmpc_qp_solve(nmpc_qp *h)
     return h->info[0];
 }
 
+/* Per-row weights of the soft rows (ng each: the L1 and L2 penalties of row j at every
+ * stage), replacing the uniform ones of `nmpc_qp_create`; nothing for a hard QP. */
+void nmpc_qp_soft_weights(nmpc_qp *h, const double *l1, const double *l2)
+{
+    if (!h->ns) return;
+    memcpy(h->zsoft, l1, sizeof(double) * h->ng);
+    memcpy(h->Zsoft, l2, sizeof(double) * h->ng);
+    for (int k = 1; k <= h->N; k++) {
+        F.d_ocp_qp_set_Zl(k, h->Zsoft, &h->qp);
+        F.d_ocp_qp_set_Zu(k, h->Zsoft, &h->qp);
+        F.d_ocp_qp_set_zl(k, h->zsoft, &h->qp);
+        F.d_ocp_qp_set_zu(k, h->zsoft, &h->qp);
+    }
+}
+
 /* The lower slacks of the soft rows of the last solve: (N+1) x ng (stage 0 zeros), or
  * NULL when the rows are hard. */
 const double *nmpc_qp_slack(const nmpc_qp *h)

@@ -142,6 +142,13 @@ class QpStep:
         self.elastic_qp = None
         if c.obstacle_rows == "exact-penalty":
             self.elastic_qp = HpipmOcpQp(*args, soft_l1=c.obstacle_l1, soft_l2=c.obstacle_l2)
+            # rows: both circles' segment slots, then their vessel slots; a wall is where
+            # it is, another boat's hull is a prediction grown by its uncertainty: where
+            # not all can hold, the vessel rows give first (`vessel_l1_share`)
+            n_seg = 2 * c.segment_slots
+            share = np.ones(nh)
+            share[n_seg:] = c.vessel_l1_share
+            self.elastic_qp.soft_weights(c.obstacle_l1 * share, c.obstacle_l2 * share)
             # (`_bind_hpipm` makes it read the hard QP's arrays)
         self.elastic_used = False
         self._bind_hpipm()

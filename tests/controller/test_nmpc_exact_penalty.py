@@ -51,3 +51,32 @@ def test_where_the_hard_qp_is_feasible_the_answer_is_the_same(width_m):
 def test_bad_penalty_settings_are_named(field, value):
     with pytest.raises(InputError, match=field):
         NmpcConfig(**{field: value})
+
+
+def test_per_row_penalties_choose_which_row_gives():
+    """Two soft rows no point satisfies (x >= 1 and x <= -1 at stage 1): with equal
+    penalties the answer splits the violation; with the second row at a tenth (the vessel
+    rows' share), the first holds and the second gives."""
+    import numpy as np
+
+    from controller.nmpc.hpipm_qp import (SET_BOUNDS, SET_CONSTRAINTS, SET_DYNAMICS,
+                                          SET_GRADIENT, HpipmOcpQp)
+
+    def solve(share):
+        qp = HpipmOcpQp(1, 1, 1, 2, np.array([], np.intc), np.array([0], np.intc),
+                        np.array([1e-6, 1e-6]), np.array([1e-6]), soft_l1=1e3, soft_l2=1.0)
+        qp.soft_weights(1e3 * np.array([1.0, share]), np.array([1.0, share]))
+        qp.A[:] = 1.0  # x1 = x0 + u0, x0 = 0
+        qp.B[:] = 1.0
+        qp.b[:] = 0.0
+        qp.lbu[:], qp.ubu[:] = -10.0, 10.0
+        qp.C[1] = [1.0, -1.0]  # rows: x1 >= 1 and -x1 >= 1
+        qp.lg[1] = [1.0, 1.0]
+        qp.ug[1] = [1e4, 1e4]
+        qp.set(SET_DYNAMICS | SET_CONSTRAINTS | SET_BOUNDS | SET_GRADIENT)
+        status, _ = qp.solve()
+        assert status == 0
+        return float(qp.x[1, 0])
+
+    assert abs(solve(1.0)) < 0.1  # both violated by about 1
+    assert solve(0.1) > 0.9  # the cheaper row gives: x1 at the first row's bound
