@@ -61,7 +61,9 @@ def _join_negative_values(argv: list[str]) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(_join_negative_values(sys.argv[1:] if argv is None else argv))
+    given = list(sys.argv[1:] if argv is None else argv)
+    args = parser.parse_args(_join_negative_values(given))
+    args.argv = given  # the command line as typed (summary.json records it)
     try:
         return int(args.func(args) or 0)
     except CanalnavError as exc:

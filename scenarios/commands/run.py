@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import sys
 from pathlib import Path
 
@@ -103,7 +104,7 @@ def run(args) -> int:
                           parallel_perception=False if args.serial_perception else None,
                           events=terminal_events(tty), mcap=args.mcap,
                           live=live, cloud_points=args.mcap_points,
-                          invocation={"command_line": " ".join(sys.argv[1:]) or None,
+                          invocation={"command_line": shlex.join(getattr(args, "argv", [])) or None,
                                       "overrides": [f"{p}={v!r}" for p, v in args.set]})
     if tty:
         sys.stderr.write("\n")
