@@ -147,10 +147,7 @@ class _World:
         return self._now
 
 
-def _round(x, digits: int = 6):
-    if x is None or not math.isfinite(x):
-        return None
-    return round(float(x), digits)
+_round = metrics.summary_round
 
 
 def run_cosim(folder: str | Path, out_dir: str | Path, duration_s: float | None = None,
@@ -302,11 +299,8 @@ def _run(system: System, out: Path, duration_s, progress) -> CosimResult:
                 progress(t + cfg.control_period_s, duration)
     wall = time.perf_counter() - wall0
     final = now
-    clear = np.array(rows_clear).reshape(-1, 2)
-    min_clear = clear.min(axis=1) if len(clear) else np.array([np.inf])
     dt = cfg.control_period_s
     duration_run = (rows_t[-1] + dt) if rows_t else 0.0
-    rates = metrics.command_rates(np.array(rows_cmd).reshape(-1, 2), dt)
     summary = {
         "scenario": scenario.name,
         "controller": scenario.controller,
@@ -314,26 +308,14 @@ def _run(system: System, out: Path, duration_s, progress) -> CosimResult:
         "status": status,
         "reached_goal": reached,
         "collision": collided,
-        "duration_s": round(duration_run, 6),
-        "min_clearance_m": _round(float(min_clear.min())),
-        "min_clearance_bow_m": _round(float(clear[:, 0].min())) if len(clear) else None,
-        "min_clearance_stern_m": _round(float(clear[:, 1].min())) if len(clear) else None,
-        "desired_separation_m": R_B_M + scenario.d_p_m,
-        "time_below_desired_s": _round(metrics.time_below(min_clear, R_B_M + scenario.d_p_m, dt)),
-        "control_effort_Jc": _round(metrics.control_effort(rates)),
-        "mean_cross_track_m": _round(float(np.mean(rows_xt))) if rows_xt else None,
-        "max_cross_track_m": _round(float(np.max(rows_xt))) if rows_xt else None,
-        "final_distance_to_goal_m": _round(float(np.hypot(*(final[:2] - goal)))),
-        "steps": len(rows_t),
+        **metrics.track_figures(rows_t, rows_clear, rows_cmd, rows_xt, final, goal,
+                                R_B_M + scenario.d_p_m, dt),
         "fallback_steps": int(fallback),
     }
     episodes = metrics.waiting_episodes(rows_wait, rows_speed, dt)
     summary.update({k: _round(v) for k, v in episodes.items()})
-    widths = np.array(rows_width, float).reshape(-1, 3)
-    by_place = metrics.separation_by_place(clear, widths[:, 0], widths[:, 1], widths[:, 2],
-                                           R_B_M + scenario.d_p_m, dt)
-    summary["narrow_below_m"] = 2 * (R_B_M + scenario.d_p_m)
-    summary.update({k: _round(v) for k, v in by_place.items()})
+    summary.update(metrics.separation_figures(rows_clear, rows_width, R_B_M + scenario.d_p_m,
+                                              dt))
     if cfg.vessels:
         summary["vessels"] = encounters.summary(dt)
     summary["cosim"] = {"master": "libcosim (libcosimpy)", "step_s": system.step_s,

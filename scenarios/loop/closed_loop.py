@@ -297,10 +297,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
                 progress(t + cfg.control_period_s, cfg.duration_s)
     wall = time.perf_counter() - wall0
 
-    clear = np.array(rows_clear).reshape(-1, 2)
-    min_clear = clear.min(axis=1) if len(clear) else np.array([np.inf])
     duration = (rows_t[-1] + cfg.control_period_s) if rows_t else 0.0
-    rates = metrics.command_rates(np.array(rows_cmd).reshape(-1, 2), cfg.control_period_s)
     summary = {
         "scenario": scenario_name,
         "controller": getattr(controller, "name", type(controller).__name__),
@@ -308,18 +305,8 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
         "status": status,
         "reached_goal": reached,
         "collision": collided,
-        "duration_s": round(duration, 6),
-        "min_clearance_m": _round(float(min_clear.min())),
-        "min_clearance_bow_m": _round(float(clear[:, 0].min())) if len(clear) else None,
-        "min_clearance_stern_m": _round(float(clear[:, 1].min())) if len(clear) else None,
-        "desired_separation_m": cfg.desired_separation_m,
-        "time_below_desired_s": _round(metrics.time_below(min_clear, cfg.desired_separation_m,
-                                                          cfg.control_period_s)),
-        "control_effort_Jc": _round(metrics.control_effort(rates)),
-        "mean_cross_track_m": _round(float(np.mean(rows_xt))) if rows_xt else None,
-        "max_cross_track_m": _round(float(np.max(rows_xt))) if rows_xt else None,
-        "final_distance_to_goal_m": _round(float(np.hypot(*(out.state[:2] - goal)))),
-        "steps": len(rows_t),
+        **metrics.track_figures(rows_t, rows_clear, rows_cmd, rows_xt, out.state, goal,
+                                cfg.desired_separation_m, cfg.control_period_s),
         "fallback_steps": fallback_steps,
         # how far the NMPC's QPs had to violate their linearised obstacle rows (units of h,
         # about metres per metre of margin; exact-penalty rows only) and on how many steps
@@ -332,11 +319,8 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
     summary["missing_scans"] = feed.missing_scans
     summary["segments_cleaned"] = dict(feed.dropped_total)
     # separation by place: kept where the canal allows it, the middle where it does not
-    widths = np.array(rows_width, float).reshape(-1, 3)
-    by_place = metrics.separation_by_place(clear, widths[:, 0], widths[:, 1], widths[:, 2],
-                                           cfg.desired_separation_m, cfg.control_period_s)
-    summary["narrow_below_m"] = 2 * cfg.desired_separation_m
-    summary.update({k: _round(v) for k, v in by_place.items()})
+    summary.update(metrics.separation_figures(rows_clear, rows_width, cfg.desired_separation_m,
+                                              cfg.control_period_s))
     if cfg.obstacles:
         summary["obstacles"] = watch.summary()
     if cfg.vessels:
@@ -402,11 +386,7 @@ class _ChangingOutlines:
         return self._current
 
 
-def _round(x: float, digits: int = 6):
-    """Round for a stable, readable summary (the log keeps full precision)."""
-    if x is None or not math.isfinite(x):
-        return None
-    return round(float(x), digits)
+_round = metrics.summary_round
 
 
 def terminal_progress(stream=sys.stderr) -> Callable[[float, float], None]:

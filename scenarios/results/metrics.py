@@ -6,6 +6,7 @@ obstacles, never to detections.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -166,6 +167,51 @@ def separation_by_place(clearance_m, width_m, width_min_hull_m, offset_m,
         "mean_centre_offset_narrow_m": float(off.mean()) if off.size else None,
         "max_centre_offset_narrow_m": float(off.max()) if off.size else None,
     }
+
+
+def summary_round(x, digits: int = 6):
+    """Round for a stable, readable summary (the log keeps full precision); None for a
+    missing or non-finite value."""
+    if x is None or not math.isfinite(x):
+        return None
+    return round(float(x), digits)
+
+
+def track_figures(times, clearances, commands, cross_track_m, final_xy, goal_xy,
+                  desired_m: float, dt: float) -> dict:
+    """A run's figures along its track, as summary.json gives them and in its order:
+    duration, least clearance (both circles and each), time below the desired separation,
+    control effort, cross-track, distance left to the goal, steps. The closed loop and the
+    co-simulation score their runs with it."""
+    r = summary_round
+    clear = np.array(clearances).reshape(-1, 2)
+    min_clear = clear.min(axis=1) if len(clear) else np.array([np.inf])
+    duration = (times[-1] + dt) if times else 0.0
+    rates = command_rates(np.array(commands).reshape(-1, 2), dt)
+    return {
+        "duration_s": round(duration, 6),
+        "min_clearance_m": r(float(min_clear.min())),
+        "min_clearance_bow_m": r(float(clear[:, 0].min())) if len(clear) else None,
+        "min_clearance_stern_m": r(float(clear[:, 1].min())) if len(clear) else None,
+        "desired_separation_m": desired_m,
+        "time_below_desired_s": r(time_below(min_clear, desired_m, dt)),
+        "control_effort_Jc": r(control_effort(rates)),
+        "mean_cross_track_m": r(float(np.mean(cross_track_m))) if cross_track_m else None,
+        "max_cross_track_m": r(float(np.max(cross_track_m))) if cross_track_m else None,
+        "final_distance_to_goal_m": r(float(np.hypot(*(np.asarray(final_xy)[:2]
+                                                       - np.asarray(goal_xy)[:2])))),
+        "steps": len(times),
+    }
+
+
+def separation_figures(clearances, widths, desired_m: float, dt: float) -> dict:
+    """The separation by place for summary.json: `narrow_below_m` and
+    `separation_by_place` over the run's clearances (N, 2) and widths (N, 3)."""
+    clear = np.array(clearances).reshape(-1, 2)
+    w = np.array(widths, float).reshape(-1, 3)
+    by_place = separation_by_place(clear, w[:, 0], w[:, 1], w[:, 2], desired_m, dt)
+    return {"narrow_below_m": 2 * desired_m,
+            **{k: summary_round(v) for k, v in by_place.items()}}
 
 
 def time_below(values, threshold: float, dt: float) -> float:
