@@ -28,6 +28,7 @@ from functools import cached_property
 
 import numpy as np
 
+from . import opencv
 from .wall_cells import fraction_on
 
 # `cfg` below is a `tracking.TrackerConfig` (it holds the thresholds); not imported, so that
@@ -204,8 +205,7 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
     cluster lying along one is that wall too. `wall_cells` (`wall_cells.WallCells`): where
     walls were seen; a cluster mostly in those cells is wall. `collect_wall_points`: return
     the confident walls' returns (inertial) in `wall_points`, for that memory."""
-    import cv2
-
+    cv2 = opencv.cv2()
     det = cfg.detection
     x0, y0, psi = (float(v) for v in pose)
     c, s = math.cos(psi), math.sin(psi)
@@ -404,8 +404,7 @@ def _on_walls(xy: np.ndarray, walls: np.ndarray, frame, cfg: "TrackerConfig") ->
     (inertial) or of their lines up to `wall_extend_m` beyond their ends (where the fit
     stopped short of the wall's last returns, next to a moored boat's end face), drawn as
     thick lines into a grid of `wall_cell_m` (no (N, M) distance table)."""
-    import cv2
-
+    cv2 = opencv.cv2()
     x0, y0, c, s = frame
     r = cfg.detection.range_m
     cell = cfg.wall_cell_m

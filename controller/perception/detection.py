@@ -22,6 +22,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..kernels import pointer
+from . import opencv
 from .cloud_crop import crop_kernel, occupancy_kernel
 
 
@@ -483,9 +484,7 @@ def _occupancy_numpy(xy: np.ndarray, cfg: DetectionConfig):
 def _hough_pieces(grid: np.ndarray, cfg: DetectionConfig) -> list:
     """Probabilistic Hough pieces of the occupancy grid, as body-frame endpoint pairs
     ((x, y), (x, y))."""
-    import cv2
-
-    found = cv2.HoughLinesP(
+    found = opencv.cv2().HoughLinesP(
         grid, 1.0, math.radians(cfg.hough_theta_deg), cfg.hough_votes,
         minLineLength=cfg.min_length_m / cfg.cell_m, maxLineGap=_max_gap(cfg, cfg.range_m) / cfg.cell_m)
     if found is None:

@@ -94,7 +94,9 @@ class LidarPerception:
 
     def __init__(self, world: CanalWorld, seed: int = 0, config=None, detection=None,
                  tracking=None, track_here: bool = True, cloud_points: int = 0):
-        import cv2  # noqa: F401 (detection's; imported here, when a worker starts)
+        from controller.perception import opencv
+
+        opencv.cv2()  # (detection's; imported here, when a worker starts)
 
         from controller.perception.detection import DEFAULT
         from scenarios.sensors.lidar import LidarSimulator
