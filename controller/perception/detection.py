@@ -24,6 +24,7 @@ from ..errors import InputError
 from ..kernels import pointer
 from . import opencv
 from .cloud_crop import crop_kernel, occupancy_kernel
+from .wall_fit import refit_compiled, wall_fit_kernel
 
 
 @dataclass(frozen=True)
@@ -532,6 +533,18 @@ def _merge(pieces, cfg: DetectionConfig):
 
 
 def _refit(lines, xy: np.ndarray, cfg: DetectionConfig):
+    """`_refit_numpy` by the compiled kernel `wall_fit.c` (the same steps, equal to rounding),
+    or by numpy where no kernel can be built."""
+    lib = wall_fit_kernel()
+    if lib is None:
+        return _refit_numpy(lines, xy, cfg)
+    hypot = math.hypot
+    order = sorted(lines, key=lambda ab: -hypot(ab[1][0] - ab[0][0], ab[1][1] - ab[0][1]))
+    order = [ab for ab in order if hypot(ab[1][0] - ab[0][0], ab[1][1] - ab[0][1]) > 0]
+    return refit_compiled(lib, order, xy, cfg) if order else []
+
+
+def _refit_numpy(lines, xy: np.ndarray, cfg: DetectionConfig):
     """Fit each line to the points near it (total least squares), longest line first, each
     point used once; split where the points leave a gap longer than the allowed gap there,
     and each run into chords (`_chords`). Returns the chords as (a, b) endpoint pairs.
