@@ -23,7 +23,18 @@ int64_t occupancy(int64_t m, const double *x, const double *y, int64_t n, double
         flat[p] = i * n + j;
         grid[i * n + j] = 255;
     }
-    for (int64_t c = 0; c < n * n; c++)
+    /* The occupied cells in row-major order, eight cells at a time: most are empty. */
+    int64_t total = n * n, c = 0;
+    for (; c + 8 <= total; c += 8) {
+        uint64_t word;
+        memcpy(&word, grid + c, sizeof word);
+        if (!word)
+            continue;
+        for (int64_t q = c; q < c + 8; q++)
+            if (grid[q])
+                lookup[q] = k++;
+    }
+    for (; c < total; c++)
         if (grid[c])
             lookup[c] = k++;
     for (int64_t c = 0; c < k; c++)
