@@ -21,5 +21,7 @@ crop_kernel = Kernel(Path(__file__).with_name("cloud_crop.c"), {
 """The compiled crops (call it: the library, or None for the numpy versions)."""
 
 occupancy_kernel = Kernel(Path(__file__).with_name("occupancy.c"), {
-    "occupancy": (_i64, [_i64, _ptr, _ptr, _i64, _f64, _f64, *[_ptr] * 6])})
-"""The compiled occupancy grid (call it: the library, or None for the numpy version)."""
+    "occupancy": (_i64, [_i64, _ptr, _ptr, _i64, _f64, _f64, *[_ptr] * 6]),
+    "grid_at": (None, [_i64, _ptr, _i64, _f64, _f64, _ptr, _ptr])})
+"""The compiled occupancy grid and lookup of a grid at points (call it: the library, or
+None for the numpy versions)."""

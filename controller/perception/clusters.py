@@ -29,6 +29,8 @@ from functools import cached_property
 import numpy as np
 
 from . import opencv
+from ..kernels import pointer
+from .cloud_crop import occupancy_kernel
 from .wall_cells import fraction_on
 
 # `cfg` below is a `tracking.TrackerConfig` (it holds the thresholds); not imported, so that
@@ -422,11 +424,32 @@ def _on_walls(xy: np.ndarray, walls: np.ndarray, frame, cfg: "TrackerConfig") ->
     for k in range(m):
         cv2.line(mask, tuple(px[k].tolist()), tuple(px[k + m].tolist()), 1, thick,
                  cv2.LINE_8, 4)
+    return grid_at(mask, xy, r, cell)
+
+
+def grid_at(grid: np.ndarray, xy: np.ndarray, r: float, cell: float) -> np.ndarray:
+    """(N,) bool: the (n, n) uint8 grid (corner at (-r, -r), cells `cell` wide) at the cell
+    of each body-frame point (N, 2), cells clipped into the grid; by the compiled kernel
+    `occupancy.c` (`grid_at_numpy` where none can be built)."""
+    lib = occupancy_kernel()
+    if lib is None or not len(xy):
+        return grid_at_numpy(grid, xy, r, cell)
+    xy = np.ascontiguousarray(xy, float)
+    grid = np.ascontiguousarray(grid, np.uint8)
+    out = np.empty(len(xy), np.uint8)
+    lib.grid_at(len(xy), pointer(xy), grid.shape[0], float(r), 1.0 / cell, pointer(grid),
+                pointer(out))
+    return out.astype(bool)
+
+
+def grid_at_numpy(grid: np.ndarray, xy: np.ndarray, r: float, cell: float) -> np.ndarray:
+    """`grid_at`'s numpy twin."""
+    n = grid.shape[0]
     i = np.floor((xy[:, 0] + r) * (1.0 / cell)).astype(np.intp)
     j = np.floor((xy[:, 1] + r) * (1.0 / cell)).astype(np.intp)
     np.clip(i, 0, n - 1, out=i)
     np.clip(j, 0, n - 1, out=j)
-    return mask[i, j].astype(bool)
+    return grid[i, j].astype(bool)
 
 
 _N_BINS = 1440  # polar image: bins of a quarter degree (the beams: ~0.35 deg apart)

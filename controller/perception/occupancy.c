@@ -53,3 +53,20 @@ int64_t occupancy(int64_t m, const double *x, const double *y, int64_t n, double
     }
     return k;
 }
+
+/* The value of an n x n grid (rows along x, columns along y, cells 1 / inv_cell wide, the
+ * grid's corner at (-range, -range)) at the cell of each of m points (x, y rows of xy),
+ * cells clipped into the grid: the tracker's lookup of where walls were drawn
+ * (clusters._on_walls), as its numpy twin computes it. */
+void grid_at(int64_t m, const double *xy, int64_t n, double range, double inv_cell,
+             const uint8_t *grid, uint8_t *out)
+{
+    double top = (double)(n - 1);
+    for (int64_t p = 0; p < m; p++) {
+        double i = floor((xy[2 * p] + range) * inv_cell);
+        double j = floor((xy[2 * p + 1] + range) * inv_cell);
+        i = i < 0.0 ? 0.0 : (i > top ? top : i);
+        j = j < 0.0 ? 0.0 : (j > top ? top : j);
+        out[p] = grid[(int64_t)i * n + (int64_t)j];
+    }
+}

@@ -91,3 +91,19 @@ def test_compiled_occupancy_matches_its_numpy_twin(seed):
     (g1, c1), (g2, c2) = _occupancy(xy, DEFAULT), _occupancy_numpy(xy, DEFAULT)
     assert g1.dtype == g2.dtype and np.array_equal(g1, g2)
     assert np.array_equal(c1, c2) and len(c1) > 1000
+
+
+def test_compiled_grid_lookup_matches_its_numpy_twin():
+    """The tracker's lookup of its wall grid at points: points on cell edges, outside the
+    grid on every side (clipped to its border cells), the same values as numpy's."""
+    from controller.perception.clusters import grid_at, grid_at_numpy
+
+    rng = np.random.default_rng(5)
+    r, cell = 60.0, 0.1
+    n = int(np.ceil(2 * r / cell))
+    grid = (rng.random((n, n)) < 0.3).astype(np.uint8)
+    xy = rng.uniform(-70, 70, (20_000, 2))
+    xy[::7] = np.round(xy[::7] / cell) * cell  # exactly on cell edges
+    got, want = grid_at(grid, xy, r, cell), grid_at_numpy(grid, xy, r, cell)
+    assert got.dtype == want.dtype == bool and want.any() and not want.all()
+    assert np.array_equal(got, want)
