@@ -176,7 +176,8 @@ def window_prediction(steps: int, dt: float) -> ca.Function:
 
 
 class WaterEstimator:
-    """Call `update(state, actuators)` every `period_s`; it returns the current estimate."""
+    """Call `update(state, actuators, time_s)` every `period_s`; it returns the current
+    estimate."""
 
     def __init__(self, config: WaterEstimatorConfig = WaterEstimatorConfig()):
         self.config = config
@@ -198,6 +199,8 @@ class WaterEstimator:
         self._buffer: deque = deque(maxlen=c.steps + 1)
         self.updates = 0
         self.skipped = 0
+        self.off_period = 0  # samples that came off the period (`update`'s time_s)
+        self._last_time = None
         self.reopened = 0  # times the water changed faster than the random walk allows
         self.unsteady = 0  # windows left out because the boat sped up or started a turn
         self._gated_in_row = 0
@@ -209,9 +212,13 @@ class WaterEstimator:
         return WaterEstimate(x[0:2].copy(), x[2:5].copy(), sigma[0:2], sigma[2:5],
                              self.updates, self.skipped, self.reopened, P[:2, :2].copy())
 
-    def update(self, state, actuators) -> WaterEstimate:
+    def update(self, state, actuators, time_s: float | None = None) -> WaterEstimate:
         """Add this period's state estimate [x, y, psi, u, v, r] and actuator positions
-        [nT, nS] (%); once a window is full, fold it into the filter."""
+        [nT, nS] (%); once a window is full, fold it into the filter. `time_s` (the caller's
+        clock): a sample that does not come one period after the last (a loop that fell
+        behind, a pause) starts a new window, and is counted in `off_period`: the window's
+        prediction assumes `period_s` between samples, and a loop's own lateness would
+        otherwise read as a current."""
         try:
             x = np.asarray(state, float).reshape(-1)[:6]
             a = np.asarray(actuators, float).reshape(-1)[:2]
@@ -221,6 +228,13 @@ class WaterEstimator:
             self.skipped += 1
             self._buffer.clear()  # a hole in the data: start a new window
             return self.estimate
+        if time_s is not None:
+            t, last = float(time_s), self._last_time
+            self._last_time = t
+            period = self.config.period_s
+            if last is not None and self._buffer and abs(t - last - period) > 0.25 * period:
+                self.off_period += 1
+                self._buffer.clear()
         self._buffer.append((x, a))
         if len(self._buffer) == self._buffer.maxlen:
             self._fold()

@@ -23,6 +23,7 @@ import numpy as np
 
 from controller.errors import CanalnavError, InputError
 
+from bridge.onboard.lateness import Lateness
 from bridge.onboard.step_log import Step, StepLog, status_line
 
 EXIT_GOAL, EXIT_STOPPED, EXIT_REFUSED, EXIT_INTERRUPTED = 0, 1, 3, 130
@@ -89,6 +90,9 @@ class BridgeResult:
     steps: int = 0
     reached_goal: bool = False
     failsafes: list = field(default_factory=list)
+    late_steps: int = 0  # control steps more than 1.5 periods after the last
+    gaps: int = 0  # of them a second or more after the last
+    worst_late_s: float = 0.0
 
 
 def _say(console, text: str) -> None:
@@ -310,6 +314,7 @@ class OnboardLoop:
         takes = inspect.signature(controller.step).parameters  # an older controller takes
         self._takes = {"blind", "vessels"} & set(takes)  # neither blindness nor vessels
         self._waiting = ""  # why the NMPC holds the boat ("way blocked", "blind"), if it does
+        self.lateness = Lateness(options.control_period_s)  # steps late, gaps
 
     # -- the run ---------------------------------------------------------------------------
     def run(self) -> BridgeResult:
@@ -355,6 +360,7 @@ class OnboardLoop:
                 stopped = self._recover()
                 if stopped is not None:
                     return stopped
+                self.lateness.pause()  # (the wait to resume is no lateness)
                 next_t = self.clock.now()
                 continue
             next_t += period
@@ -393,6 +399,12 @@ class OnboardLoop:
         """One control period; returns a fault that calls for the failsafe, else None."""
         from bridge.onboard.ekf_state import predict_vector
 
+        _, warning = self.lateness.tick(t)
+        if warning:  # said to the log, the console and the ground station
+            hb = self.link.heartbeat
+            self.log.event(t, warning, hb.mode if hb else "", hb.armed if hb else None)
+            self.link.statustext(f"canalnav: {warning}"[:200], MAV_SEVERITY_WARNING)
+            self._say(f"bridge: warning: {warning}")
         link = self.link
         state = link.state
         age, delay = link.state_age_s, link.link_delay_s
@@ -528,7 +540,11 @@ class OnboardLoop:
             return None
 
     def _result(self, code: int, reason: str, reached: bool = False) -> BridgeResult:
-        return BridgeResult(code, reason, self.steps, reached, list(self.failsafes))
+        late = self.lateness
+        if late.summary():
+            self._say(f"bridge: {late.summary()}")
+        return BridgeResult(code, reason, self.steps, reached, list(self.failsafes),
+                            late.late_steps, late.gaps, late.worst_late_s)
 
     # -- console -------------------------------------------------------------------------------
     def _show(self, step: Step) -> None:

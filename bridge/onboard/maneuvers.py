@@ -38,6 +38,7 @@ import numpy as np
 from controller.errors import CanalnavError, InputError
 from controller.geometry import wrap_angle
 
+from bridge.onboard.lateness import Lateness
 from bridge.onboard.loop import (EXIT_GOAL, EXIT_INTERRUPTED, EXIT_STOPPED, MAV_SEVERITY_CRITICAL,
                             MAV_SEVERITY_INFO, MAV_SEVERITY_WARNING, BridgeOptions, link_fault,
                             prepare_link, safe_stop)
@@ -56,8 +57,6 @@ HULL_MARGIN_M = 5.0  # a hull circle (R_b = 3 m) 2 m ahead of the reference poin
 STOP_FACTOR = 1.5  # on the model's coasting distance
 RAY_STEP_M = 5.0
 RAY_MAX_M = 2000.0
-LATE_FACTOR = 1.5  # a control step this many periods after the last is late
-LATE_WARN_AFTER = 10  # late steps before the warning (a few are normal on a busy computer)
 MAX_STEP_PERIODS = 5.0  # a late step moves the commands at most this many periods' worth
 
 
@@ -127,10 +126,7 @@ class ManeuverSession:
         self._servos = None
         self._start_xy = None
         self._next_t = None
-        self._last_tick = None
-        self.steps = 0
-        self.late_steps = 0  # control steps more than LATE_FACTOR periods after the last
-        self.worst_late_s = 0.0
+        self.lateness = Lateness(self.period)  # steps late, gaps (the loop behind the clock)
         self._session_fh = None
         self._session = None
         self.failsafes: list[str] = []
@@ -177,12 +173,11 @@ class ManeuverSession:
             if self._session_fh is not None:
                 self._session_fh.close()
         result.failsafes = list(self.failsafes)
-        result.steps, result.late_steps = self.steps, self.late_steps
-        result.worst_late_s = self.worst_late_s
-        if self.late_steps:
-            self._say(f"maneuvers: control loop: {self.late_steps} of {self.steps} steps late "
-                      f"(> {LATE_FACTOR:g} periods after the last), the worst by "
-                      f"{self.worst_late_s:.2f} s")
+        late = self.lateness
+        result.steps, result.late_steps = late.steps, late.late_steps
+        result.worst_late_s = late.worst_late_s
+        if late.summary():
+            self._say(f"maneuvers: {late.summary()}")
         return result
 
     def _read_servo_params(self):
@@ -381,19 +376,11 @@ class ManeuverSession:
         jumps than the actuators follow in one step."""
         target = np.clip(np.asarray(target, float), -100.0, 100.0)
         now = self.clock.now()
-        elapsed = self.period if self._last_tick is None else now - self._last_tick
-        self._last_tick = now
-        self.steps += 1
-        if elapsed > LATE_FACTOR * self.period:
-            self.late_steps += 1
-            self.worst_late_s = max(self.worst_late_s, elapsed - self.period)
-            if self.late_steps == LATE_WARN_AFTER:
-                self._event(f"control loop late: step {self.steps} came {elapsed:.2f} s after "
-                            f"the last (period {self.period:g} s)")
-                self._say(f"maneuvers: warning: the control loop falls behind the clock ("
-                          f"{self.late_steps} of {self.steps} steps late, this one {elapsed:.2f} s "
-                          f"for a {self.period:g} s period): the servo outputs move in larger "
-                          "jumps; lower --speedup, or give sysid --actuator-rates")
+        elapsed, warning = self.lateness.tick(now)
+        if warning:
+            self._event(warning)
+            self._say(f"maneuvers: warning: {warning}: the servo outputs move in larger "
+                      "jumps; lower --speedup, or give sysid --actuator-rates")
         step = self.rates * min(max(elapsed, 0.0), MAX_STEP_PERIODS * self.period)
         self._cmd = self._cmd + np.clip(target - self._cmd, -step, step)
         self.link.send_commands(*self._cmd)

@@ -77,7 +77,7 @@ class NmpcController:
         from controller.water_estimator import usable_current
 
         t0 = time.perf_counter()
-        water = self.estimator.update(state, actuators)
+        water = self.estimator.update(state, actuators, time_s)
         estimator_s = time.perf_counter() - t0
         if self.water == "estimated":  # each part of the current as far as it is known
             current = usable_current(water, float(np.asarray(state, float)[2]),

@@ -501,3 +501,48 @@ def test_bridge_writes_run_mcap_on_its_clock(make_autopilot, vclock, tmp_path):
         assert (n, e) == pytest.approx((float(row["x_m"]), float(row["y_m"])), abs=1e-3)
         assert fig["throttle_pwm_us"] == float(row["throttle_pwm_us"])
     assert len(msgs[TOPICS["cloud"]][0][1].data) > 12 * 100
+
+
+class SlowController(StubController):
+    """A controller whose steps take `busy_s` of the clock at the calls given (a busy
+    computer): the loop falls behind."""
+
+    def __init__(self, clock, busy_s: dict, **kwargs):
+        super().__init__(**kwargs)
+        self.clock, self.busy_s = clock, busy_s
+
+    def step(self, time_s, state, actuators, segments):
+        decision = super().step(time_s, state, actuators, segments)
+        self.clock.sleep(self.busy_s.get(len(self.calls), 0.0))
+        return decision
+
+
+def test_a_loop_that_falls_behind_says_so(make_autopilot, vclock, scenario):
+    """Steps 5-24 take 0.2 s (each next step late), step 40 takes 1.2 s (a gap): the
+    warning once the late steps are ten, the gap each time, to the console and the ground
+    station, and the count at the end and in the result."""
+    ap = make_autopilot(state=(0.0, 0.0, 0.0, 2.0, 0.0, 0.0))
+    busy = {k: 0.2 for k in range(5, 25)} | {40: 1.2}
+    result, console = run_loop(ap, vclock, scenario, SlowController(vclock, busy, command=(20, 0)),
+                               mode="MANUAL", stale_s=5.0)
+    assert result.exit_code == EXIT_GOAL
+    assert result.late_steps == 21 and result.gaps == 1
+    assert 1.05 < result.worst_late_s < 1.3
+    assert console.count("bridge: warning: control loop falls behind the clock") == 1
+    assert console.count("bridge: warning: control loop: a gap of 1.2") == 1
+    assert f"control loop: 21 of {result.steps} steps late" in console
+    texts = [e for e in events(ap) if e.startswith("text: canalnav: control loop")]
+    assert len(texts) == 2
+
+
+def test_lateness_counts_late_steps_and_gaps_and_forgets_a_pause():
+    from bridge.onboard.lateness import Lateness
+
+    late = Lateness(0.1)
+    times = [0.0, 0.1, 0.2, 0.4, 0.5, 2.0, 2.1]
+    said = [late.tick(t)[1] for t in times]
+    assert late.late_steps == 2 and late.gaps == 1 and abs(late.worst_late_s - 1.4) < 1e-9
+    assert said[5].startswith("control loop: a gap of 1.50 s before step 6")
+    late.pause()
+    assert late.tick(30.0) == (0.1, None) and late.late_steps == 2
+    assert Lateness(0.1).summary() is None

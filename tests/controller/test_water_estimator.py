@@ -114,3 +114,39 @@ def test_bad_data_is_skipped_and_counted_never_raised():
 def test_bad_configuration_is_a_clear_error(field, value):
     with pytest.raises(InputError, match=field):
         WaterEstimatorConfig(**{field: value})
+
+
+def _late_loop(with_time: bool, late=(0.3, 0.4, 0.3), seconds=120.0, seed=4):
+    """Still water, a slow zigzag; the loop samples the state one, two or three periods
+    apart with probabilities `late` (a busy computer, a sped-up simulator), the estimator
+    told the time or not. The largest current it reads after the first 20 s, and the
+    estimator."""
+    p = IDENTIFIED.as_vector()
+    rng = np.random.default_rng(seed)
+    est = WaterEstimator(WaterEstimatorConfig())
+    x, act = np.array([0.0, 0.0, 0.0, 2.0, 0.0, 0.0]), np.array([47.0, 0.0])
+    t, worst = 0.0, 0.0
+    while t < seconds:
+        periods = int(rng.choice([1, 2, 3], p=late))
+        for _ in range(10 * periods):
+            steer = 25.0 * np.sign(np.sin(2 * np.pi * t / 20.0))
+            xn, an, _ = PLANT(x, act, [47.0, steer], p, (0.0, 0.0), [10.0, 40.0], 0.01)
+            x, act = np.asarray(xn).ravel(), np.asarray(an).ravel()
+            t += 0.01
+        measured = x + rng.normal(0.0, [0.02, 0.02, 0.002, 0.005, 0.005, 0.001])
+        e = est.update(measured, act, round(t, 6) if with_time else None)
+        if t > 20.0:
+            worst = max(worst, float(np.hypot(*e.current_ne)))
+    return worst, est
+
+
+def test_a_late_loop_is_not_read_as_a_current():
+    """A window whose samples do not come one period apart is not used: a loop mostly late
+    estimates nothing (still water stays still), where told nothing it reads a current; a
+    loop late one step in ten still estimates."""
+    worst, est = _late_loop(with_time=True)
+    assert est.updates == 0 and est.off_period > 300 and worst < 1e-9
+    blind, est = _late_loop(with_time=False)
+    assert est.updates > 20 and blind > 0.03
+    worst, est = _late_loop(with_time=True, late=(0.9, 0.05, 0.05))
+    assert est.updates > 20 and est.off_period > 50 and worst < 0.05
