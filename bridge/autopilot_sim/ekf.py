@@ -39,6 +39,11 @@ class NoiseSpec:
     heading_bias_rad: float = 0.0
     heading_wander_sigma_rad: float = 0.0
     heading_wander_tau_s: float = 300.0
+    # GPS glitches the EKF takes in: (at_s, duration_s, north_m, east_m), times from the
+    # EKF's start; the position is off by (north, east) for the glitch's duration, jumping
+    # there and back, as ArduPilot's EKF does when it resets to a GPS that jumped beyond its
+    # innovation gate. The velocity stays right (it comes from the GPS's Doppler).
+    gps_glitches: tuple = ()
 
     def __post_init__(self) -> None:
         for name in ("pos_sigma_m", "pos_tau_s", "heading_sigma_rad", "heading_tau_s",
@@ -50,6 +55,16 @@ class NoiseSpec:
                 raise ValueError(f"EKF noise {name} must be a finite number"
                                  f"{'' if name == 'heading_bias_rad' else ' >= 0'}"
                                  f"{' > 0' if name.endswith('tau_s') else ''}, got {value!r}")
+        for glitch in self.gps_glitches:
+            try:
+                at, duration, north, east = (float(v) for v in glitch)
+            except (TypeError, ValueError):
+                raise ValueError(f"GPS glitch {glitch!r}: expected (at_s, duration_s, north_m, "
+                                 "east_m)") from None
+            if not (all(math.isfinite(v) for v in (at, duration, north, east)) and at >= 0
+                    and duration > 0):
+                raise ValueError(f"GPS glitch {glitch!r}: at_s >= 0, duration_s > 0 and finite "
+                                 "offsets needed")
 
 
 @dataclass(frozen=True)
@@ -79,6 +94,7 @@ class EkfModel:
         self._err = np.clip(self._rng.standard_normal(6), -3, 3) * self._sigma
         self._dt = None
         self._a = self._b = None
+        self._t = 0.0  # seconds since the EKF started (the glitches' clock)
         self._wander = 0.0
         self._wander_rng = None
         if spec.heading_wander_sigma_rad > 0:
@@ -88,6 +104,7 @@ class EkfModel:
 
     def step(self, dt: float) -> None:
         """Advance every error by `dt` seconds (exact discretisation of the Gauss-Markov law)."""
+        self._t += dt
         if dt != self._dt:
             self._dt = dt
             self._a = np.exp(-dt / self._tau)
@@ -107,6 +124,15 @@ class EkfModel:
         """The heading error's bias part now: the constant bias and the wander."""
         return self.spec.heading_bias_rad + self._wander
 
+    @property
+    def glitch_ne(self) -> tuple[float, float]:
+        """The position offset of the GPS glitch under way (0, 0: none)."""
+        north = east = 0.0
+        for at, duration, dn, de in self.spec.gps_glitches:
+            if at <= self._t < at + duration:
+                north, east = north + float(dn), east + float(de)
+        return north, east
+
     def ready(self, since_boot_s: float) -> bool:
         return since_boot_s >= self.delay_s
 
@@ -115,8 +141,9 @@ class EkfModel:
         x, y, psi, u, v, r = (float(s) for s in state)
         c, s = math.cos(psi), math.sin(psi)
         e = self._err
+        gn, ge = self.glitch_ne if self.spec.gps_glitches else (0.0, 0.0)
         return Estimate(
-            north_m=x + e[0], east_m=y + e[1],
+            north_m=x + e[0] + gn, east_m=y + e[1] + ge,
             vn_mps=c * u - s * v + e[3], ve_mps=s * u + c * v + e[4],
             psi_rad=float(wrap_angle(psi + e[2] + self.heading_bias_rad)), r_radps=r + e[5],
         )

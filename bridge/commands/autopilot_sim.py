@@ -55,7 +55,36 @@ def register(sub) -> None:
                    help="the autopilot's clock stalls at AT seconds after start for STEP "
                    "seconds and stays that far behind (a negative STEP: it jumps ahead), as "
                    "SITL's under load; repeatable, e.g. --clock-fault 60:0.6")
+    p.add_argument("--gps-glitch", action="append", default=[], metavar="AT:SECONDS:NORTH,EAST",
+                   help="the EKF takes in a GPS glitch: from AT seconds after start, for SECONDS, "
+                   "its position is off by NORTH, EAST metres (jumping there and back, as "
+                   "ArduPilot's EKF resetting to a GPS that jumped); repeatable, e.g. "
+                   "--gps-glitch 60:5:0,6")
     p.set_defaults(func=run)
+
+
+def parse_gps_glitches(items: list[str]) -> tuple:
+    """AT:SECONDS:NORTH,EAST strings to (at, duration, north, east); InputError names the bad
+    item."""
+    import math
+
+    from controller.errors import InputError
+
+    out = []
+    for item in items:
+        parts = item.replace(",", ":").split(":")
+        try:
+            if len(parts) != 4:
+                raise ValueError
+            at, duration, north, east = (float(v) for v in parts)
+            if not (at >= 0 and duration > 0 and math.isfinite(at + duration + north + east)):
+                raise ValueError
+        except ValueError:
+            raise InputError(f"--gps-glitch {item!r}: expected AT:SECONDS:NORTH,EAST (seconds "
+                             "after start >= 0, a positive duration, metres), e.g. 60:5:0,6") \
+                from None
+        out.append((at, duration, north, east))
+    return tuple(out)
 
 
 def _ekf_noise(args):
@@ -70,10 +99,12 @@ def _ekf_noise(args):
             and args.heading_wander >= 0):
         raise InputError(f"--heading-bias {args.heading_bias} / --heading-wander "
                          f"{args.heading_wander}: finite degrees needed, the wander >= 0")
-    if not args.heading_bias and not args.heading_wander:
+    glitches = parse_gps_glitches(getattr(args, "gps_glitch", []))
+    if not args.heading_bias and not args.heading_wander and not glitches:
         return None
     return NoiseSpec(heading_bias_rad=math.radians(args.heading_bias),
-                     heading_wander_sigma_rad=math.radians(args.heading_wander))
+                     heading_wander_sigma_rad=math.radians(args.heading_wander),
+                     gps_glitches=glitches)
 
 
 def parse_clock_faults(items: list[str]) -> list[tuple[float, float]]:

@@ -39,7 +39,7 @@ from bridge.shared.ardupilot import MODE_NAMES, MODES, OVERRIDE_IGNORE, OVERRIDE
 from bridge.onboard.boot_clock import BootClock
 from bridge.shared.signing import counted_as_bad_data
 from bridge.onboard.ekf_state import (EkfState, horizontal_position_ok, state_from_global,
-                              state_from_local)
+                              state_from_local, predict_vector)
 from controller.geodetic import geodetic_to_ned
 
 os.environ["MAVLINK20"] = "1"  # before the dialect loads: MAVLink 2 (needed for signing)
@@ -56,6 +56,8 @@ VEHICLE_TYPES_NOT_AUTOPILOT = {mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CO
                                mavlink.MAV_TYPE_GIMBAL, mavlink.MAV_TYPE_ADSB}
 MAX_MESSAGES_PER_PUMP = 5000  # a flood cannot starve the control loop for long
 POLL_S = 0.01
+POSITION_JUMP_M = 2.0  # the EKF's position moving this much more than its velocity says
+POSITION_JUMP_WINDOW_S = 1.0  # ... between two positions at most this far apart in time
 GLOBAL_STALE_MS = 1000  # LOCAL_POSITION_NED stands in when GLOBAL_POSITION_INT is this old
 FRAME_TOLERANCE_M = 1.0  # LOCAL (from the EKF origin) and GLOBAL must agree this well
 RC_PARAM = re.compile(r"^(RCMAP_[A-Z]+|RC\d+_[A-Z]+)$")  # what the RC mapping is made of
@@ -114,6 +116,7 @@ class LinkCounters:
     autopilot_restarts: int = 0  # time_boot_ms went backwards
     frame_mismatches: int = 0  # LOCAL_POSITION_NED and GLOBAL_POSITION_INT disagreed
     clock_jumps: int = 0  # the autopilot's clock stalled or jumped (boot_clock re-anchored)
+    position_jumps: int = 0  # the EKF's position jumped (a GPS glitch, an EKF reset)
 
 
 def parse_url(url: str) -> tuple[str, int]:
@@ -177,6 +180,7 @@ class AutopilotLink:
         self.position_source = None  # the message the state's position comes from
         self.frame_mismatch_m = None  # newest LOCAL vs GLOBAL comparison
         self.notices: deque[tuple[float, str]] = deque(maxlen=100)  # for the loop to log
+        self.jumps_ne = (0.0, 0.0)  # (north, east) m: the sum of the position's jumps
         self.servo_outputs: deque[tuple[float, tuple[int, ...]]] = deque(maxlen=400)
         self._last_rx_s: float | None = None
         self._last_boot_ms: int | None = None
@@ -382,12 +386,33 @@ class AutopilotLink:
             return
         (att, t_att), (source, pos, t_pos) = self._attitude, self._position
         received = min(t_att, t_pos)
+        before = self._state
         if source == "GLOBAL_POSITION_INT":
             self._state = state_from_global(att, pos, self.geodetic_origin, received)
         elif self.geodetic_origin is None:
             self._state = state_from_local(att, pos, received)
         else:
             self._state = state_from_local(att, pos, received, self._ekf_offset)
+        self._check_jump(before, self._state, t_pos)
+
+    def _check_jump(self, before, after, now: float) -> None:
+        """A position that moved more than `POSITION_JUMP_M` from where the last one's
+        velocity carried it (a GPS glitch the EKF took in, an EKF reset) is counted and said:
+        the boat did not move so, and what was placed by the old position (walls, tracks,
+        the water estimate's window) is that far off."""
+        if before is None:
+            return
+        dt = after.time_boot_s - before.time_boot_s
+        if not 0.0 < dt <= POSITION_JUMP_WINDOW_S:
+            return
+        expected = predict_vector(before.vector, dt)
+        dn, de = after.x - expected[0], after.y - expected[1]
+        if math.hypot(dn, de) > POSITION_JUMP_M:
+            self.counters.position_jumps += 1
+            self.jumps_ne = (self.jumps_ne[0] + dn, self.jumps_ne[1] + de)
+            self.notices.append((now, f"the EKF's position jumped {math.hypot(dn, de):.1f} m "
+                                      f"({dn:+.1f} m north, {de:+.1f} m east) between two "
+                                      f"messages {dt:.2f} s apart: a GPS glitch or an EKF reset"))
 
     def _on_servo_output_raw(self, msg, now: float) -> None:
         """The autopilot's servo outputs 1-16 (us) at its time (s since boot)."""

@@ -71,6 +71,13 @@ class BridgeOptions:
     live: tuple | None = None  # (host, port): serve the steps live to Foxglove
     cloud_points: int = 3000  # LiDAR points per scan kept for run.mcap and the live view
     safe_repeats: int = 3  # neutral and release are each sent this often, 50 ms apart
+    # A jump of the EKF's position (a GPS glitch it took in, a reset) is taken out of the
+    # state the controller gets, held out `jump_hold_s` after the last jump (a glitch that
+    # jumps back meanwhile cancels itself) and then let back in with the time constant
+    # `jump_blend_s` (0: at once), so that the boat does not steer after a jump it did not
+    # make, and follows one that stays (a reset to a better fix) smoothly.
+    jump_hold_s: float = 10.0
+    jump_blend_s: float = 30.0
 
 
 @dataclass
@@ -315,6 +322,9 @@ class OnboardLoop:
         self._takes = {"blind", "vessels"} & set(takes)  # neither blindness nor vessels
         self._waiting = ""  # why the NMPC holds the boat ("way blocked", "blind"), if it does
         self.lateness = Lateness(options.control_period_s)  # steps late, gaps
+        self._jumps_seen = np.zeros(2)  # the link's sum of jumps at the last step
+        self._jump_offset = np.zeros(2)  # (north, east) m taken out of the state (jump_blend_s)
+        self._jump_t = None
 
     # -- the run ---------------------------------------------------------------------------
     def run(self) -> BridgeResult:
@@ -409,6 +419,7 @@ class OnboardLoop:
         state = link.state
         age, delay = link.state_age_s, link.link_delay_s
         pred = predict_vector(state.vector, age + delay)
+        pred[:2] -= self._blend_jumps(t)
         cloud = self.lidar.scan(t, pred)
         lost = self._lidar_health(t)
         if lost is not None:
@@ -443,6 +454,26 @@ class OnboardLoop:
         self.steps += 1
         self._show(step)
         return None
+
+    def _blend_jumps(self, t: float) -> np.ndarray:
+        """The part of the EKF's position jumps still taken out of the state (north, east):
+        each new jump the link saw is added at once and restarts the hold; after
+        `jump_hold_s` the whole decays with `jump_blend_s`."""
+        hold, tau = self.options.jump_hold_s, self.options.jump_blend_s
+        jumps = np.asarray(self.link.jumps_ne, float)
+        new = jumps - self._jumps_seen
+        self._jumps_seen = jumps
+        if tau <= 0:
+            return self._jump_offset
+        if self._jump_t is not None and t > self._jump_t and np.any(self._jump_offset):
+            self._jump_offset *= math.exp(-(t - self._jump_t) / tau)
+            self._jump_t = t
+            if np.hypot(*self._jump_offset) < 0.01:
+                self._jump_offset[:] = 0.0
+        if np.any(new):
+            self._jump_offset += new
+            self._jump_t = t + hold  # decay starts here
+        return self._jump_offset
 
     def _lidar_health(self, t: float) -> str | None:
         """What a merged LiDAR source has to say (a sensor silent or back, malformed packets
