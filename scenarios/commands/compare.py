@@ -18,8 +18,10 @@ def register(sub) -> None:
     p.add_argument("--out", default=None, help="output folder (default runs/compare-<scenario>)")
     p.add_argument("--seed", type=int, default=None, help="noise seed (default: the scenario's)")
     p.add_argument("--controllers", default="nmpc,los-pid,lexicographic",
-                   help="comma-separated controllers to compare")
-    p.add_argument("--plant", default="fmu", help="plant: fmu (default) or python-model")
+                   help="comma-separated controllers to compare, of nmpc, los-pid, "
+                   "lexicographic and los-pid-waypoints (default nmpc,los-pid,lexicographic)")
+    p.add_argument("--plant", default="fmu", metavar="NAME",
+                   help="the boat simulated: fmu (default) or python-model")
     from scenarios.commands.run import add_viz_arguments
 
     add_viz_arguments(p, live=False)

@@ -65,14 +65,21 @@ def register(sub) -> None:
         "is reached and every pass criterion holds, else 1.",
     )
     p.add_argument("scenario", help="scenario file (TOML), e.g. scenarios/pohang.toml")
-    p.add_argument("--controller", help="override the scenario's controller")
+    p.add_argument("--controller", metavar="NAME",
+                   help="override the scenario's controller: nmpc (the paper's NMPC), los-pid "
+                   "(baseline 1: the NMPC's planner at 1 Hz + LOS-PID), lexicographic "
+                   "(baseline 2: the paper's Appendix planner + LOS-PID) or los-pid-waypoints "
+                   "(LOS-PID on the waypoints, no planner: blind to walls)")
     p.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", type=_assignment,
                    help="change a scenario key by its dotted path, as a TOML value (e.g. "
                    "--set current.east_mps=0.2 --set plant.boat.Nr=-2500); repeatable")
     p.add_argument("--out", default=None, help="output folder (default runs/<scenario>-<controller>)")
     p.add_argument("--seed", type=seed_number, default=None,
                    help="noise seed, a whole number >= 0 (default: the scenario's)")
-    p.add_argument("--plant", default="fmu", help="plant: fmu (default), python-model, mavlink-sim")
+    p.add_argument("--plant", default="fmu", metavar="NAME",
+                   help="the boat simulated: fmu (default: the boat FMU), python-model (the "
+                   "CasADi model stepped in Python) or mavlink-sim (the FMU behind a simulated "
+                   "ArduPilot Rover, driven over MAVLink as canalnav bridge does)")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--water", choices=("estimated", "still", "true"), default=None,
                    help="what the NMPC knows of the current and its model's error: the on-line "
