@@ -133,3 +133,19 @@ def test_run_help_lists_the_controllers_and_plants():
 
 def _parser_of(words):
     return dict(_subcommands(build_parser()))[tuple(words)]
+
+
+def test_run_and_compare_write_run_mcap_only_when_asked():
+    """Issue 35: with the viz extra installed, `canalnav compare` wrote three 42 MB run.mcap
+    by default; `run` and `compare` now write it only with --mcap (scenarios/README.md says
+    why), whatever is installed; the bridge's --log keeps it (a drive is not run again)."""
+    parser = build_parser()
+    for argv in (["run", "a.toml"], ["compare", "a.toml"]):
+        assert parser.parse_args(argv).mcap is False, argv
+        assert parser.parse_args(argv + ["--mcap"]).mcap is True, argv
+        assert parser.parse_args(argv + ["--no-mcap"]).mcap is False, argv
+    import inspect
+
+    from scenarios.studies.compare import compare
+
+    assert inspect.signature(compare).parameters["mcap"].default is False

@@ -10,8 +10,8 @@ def register(sub) -> None:
         "compare", help="run the NMPC and the paper's two baselines on one scenario",
         description="Runs nmpc, los-pid (baseline 1: NMPC planner at 1 Hz + LOS-PID) and "
         "lexicographic (baseline 2: the paper's Appendix planner + LOS-PID) on the same "
-        "scenario and seed. Each run writes its own summary.json (and run.mcap, see canalnav "
-        "run) under DIR/<controller>; "
+        "scenario and seed. Each run writes its own summary.json (and with --mcap its run.mcap, "
+        "see canalnav run) under DIR/<controller>; "
         "DIR gets compare.md, compare.json and one separation plot of all three.",
     )
     p.add_argument("scenario", help="scenario file (TOML)")
