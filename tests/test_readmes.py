@@ -76,3 +76,45 @@ def test_every_usage_line_names_a_command_and_options_it_has():
                     for option in re.findall(r"(?<![\w-])(--?[a-zA-Z][\w-]*)", usage)
                     if option not in text]
     assert seen >= 15 and not bad, (seen, bad)
+
+
+def _toml_blocks(readme: Path) -> list[str]:
+    return re.findall(r"^```toml\n(.*?)^```", readme.read_text(), re.S | re.M)
+
+
+def test_every_scenario_example_in_a_readme_loads(tmp_path):
+    """Every ```toml block of the READMEs: a whole scenario file loads as it is
+    (load_scenario); a block of alternatives ("replaces the tables of the same name above") is
+    completed with the README's last whole example's [scenario], and its [canal] and [route]
+    where the block gives none; a study file loads as one in scenarios/studies/ (its paths
+    are relative to it). A [lidar] table is checked as the bridge reads it."""
+    import tomllib
+
+    from bridge.lidar.config import parse_lidar_table
+    from scenarios.scenario_file import load_scenario, scenario_from_table
+    from scenarios.studies.sweep_spec import parse_study
+
+    seen = 0
+    for readme in _readmes():
+        example = None
+        for i, block in enumerate(_toml_blocks(readme), 1):
+            where = f"{readme.relative_to(ROOT)}, toml block {i}"
+            data = tomllib.loads(block)
+            if "study" in data:
+                study = parse_study(block, ROOT / "scenarios" / "studies" / "readme_example.toml")
+                assert study.runs, where
+            elif {"scenario", "canal", "route"} <= data.keys():
+                path = tmp_path / f"block{i}.toml"
+                path.write_text(block)
+                scenario = load_scenario(path)
+                example = data
+            else:
+                assert example is not None, f"{where}: alternatives before a whole example"
+                full = {"scenario": example["scenario"]}
+                full.update({k: example[k] for k in ("canal", "route") if k not in data})
+                full.update(data)
+                scenario = scenario_from_table(full, where)
+            if "study" not in data and scenario.lidar_table is not None:
+                parse_lidar_table(scenario.lidar_table, where, "lidar.", tmp_path)
+            seen += 1
+    assert seen >= 5, seen
