@@ -3,6 +3,8 @@ the scenario's `[lidar]` table)."""
 
 from __future__ import annotations
 
+import math
+
 from controller.errors import InputError
 
 from .config import LidarConfig, SensorConfig, load_lidar_config, parse_lidar_table, parse_source
@@ -34,10 +36,29 @@ def open_sensor(cfg: SensorConfig):
                      "be merged with other sensors")
 
 
+DRIVER_MOUNT = (0.0, 0.0, 0.0, math.pi, 0.0, 0.0)
+"""Where a source alone sits when the scenario names no `[sensors.replay_mount]`: the drivers
+and ROS report x forward, y left, z up (REP 103), so an upright unit is the boat's frame
+(x forward, y starboard, z down) rolled 180 deg. Recorded scans (`replay:`) have no known
+convention and stay on the scenario's mount."""
+DRIVER_KINDS = ("velodyne", "velodyne-pcap", "ouster", "ouster-pcap", "rosbag")
+
+
+def default_mount(kind: str, scenario) -> tuple:
+    """The mount of one `--lidar` source without a configuration: the scenario's
+    `[sensors.replay_mount]` when it gives one (any value not zero), else, for a source whose
+    convention is known (DRIVER_KINDS), that convention (DRIVER_MOUNT)."""
+    mount = tuple(float(v) for v in getattr(scenario, "replay_mount", (0.0,) * 6))
+    if any(mount) or kind not in DRIVER_KINDS:
+        return mount
+    return DRIVER_MOUNT
+
+
 def lidar_config(specs, config_path, scenario) -> LidarConfig | None:
     """The configuration in force: the file, else the scenario's [lidar]; --lidar sources
     replace the configured ones in order (the same layout, live or recorded), or without a
-    configuration each is one sensor on the scenario's replay_mount."""
+    configuration each is one sensor on the scenario's replay_mount (a driver's or a ROS bag's
+    on its convention when the scenario gives none: `default_mount`)."""
     specs = [s for s in ([specs] if isinstance(specs, str) else list(specs or ())) if s]
     config = None
     if config_path is not None:
@@ -53,7 +74,7 @@ def lidar_config(specs, config_path, scenario) -> LidarConfig | None:
         for i, text in enumerate(specs):
             kind, target = parse_source(text)
             sensors.append(SensorConfig(f"lidar{i}" if len(specs) > 1 else "lidar", kind,
-                                        target, tuple(scenario.replay_mount)))
+                                        target, default_mount(kind, scenario)))
         return LidarConfig(tuple(sensors), source="--lidar")
     if specs and specs != ["sim"]:
         from dataclasses import replace

@@ -8,9 +8,9 @@ def register(sub) -> None:
     p = sub.add_parser(
         "maneuvers", help="simulate the identification manoeuvres as CSV logs",
         description="Simulates the paper's identification runs from the boat model (exact "
-        "plant, actuator rate limits 10 and 40 %%/s) at 10 Hz with seeded sensor noise: "
-        "acceleration 31.0-50.6 %%, deceleration 50.6-20.0 %% (each held to steady state), a "
-        "20 deg/50 %% zigzag at 42 %% (three overshoots) and a held-out 10 deg/30 %% zigzag "
+        "plant, actuator rate limits 10 and 40 %/s) at 10 Hz with seeded sensor noise: "
+        "acceleration 31.0-50.6 %, deceleration 50.6-20.0 % (each held to steady state), a "
+        "20 deg/50 % zigzag at 42 % (three overshoots) and a held-out 10 deg/30 % zigzag "
         "(header 'use: heldout'). Each log carries the true parameters in its header. With "
         "--connect the same runs are driven on the boat over MAVLink instead (see below).",
     )

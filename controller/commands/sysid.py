@@ -21,7 +21,7 @@ def register(sub) -> None:
         description="Solves the paper's identification NLP (eq. SI) with IPOPT: surge from "
         "the straight runs (W = diag(0,0,0,1,0,0)), then sway-yaw from the turning runs "
         "(W = diag(1,1,100,0,100,100)) with the surge part fixed. Runs are told apart by their "
-        "'# maneuver:' header, else by content (|nS| <= 1 %% throughout: surge). Runs with "
+        "'# maneuver:' header, else by content (|nS| <= 1 % throughout: surge). Runs with "
         "'# use: heldout' (or given with --heldout) never enter the fit; they check it. The "
         "logs fix the parameters up to one common scale: m11 is fixed from the weight plus "
         "Soding's added-mass estimate unless --fix names another surge parameter. A LOG may be "

@@ -26,7 +26,15 @@ from pathlib import Path
 
 def register_bench(sub) -> None:
     p = sub.add_parser("loop", help="closed-loop speed (real-time factor, where the time goes), "
-                       "LiDAR in a worker process vs in the loop's process")
+                       "LiDAR in a worker process vs in the loop's process",
+                       description="Runs one scenario (default: the Pohang canal, NMPC, LiDAR "
+                       "and EKF in the loop) with the LiDAR in a worker process and in this "
+                       "process, alternately --repeats times, and prints one JSON object: the "
+                       "real-time factor and per-step milliseconds of each part for both, the "
+                       "ratio of their wall times, their CPU time (cpu_real_time_factor compares "
+                       "builds on a shared machine) and whether the two gave the same summary. "
+                       "With --mcap it compares the loop writing run.mcap (and, with --live, "
+                       "serving it) against the same loop without.")
     p.add_argument("scenario", nargs="?", default=None,
                    help="scenario file (default: scenarios/pohang.toml)")
     p.add_argument("--duration", type=float, default=120.0,

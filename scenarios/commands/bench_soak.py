@@ -15,7 +15,14 @@ def register_bench(sub) -> None:
     from scenarios.commands.sweep import add_engine_options
 
     p = sub.add_parser("soak", help="every scenario file with many seeds: no exception, "
-                       "collision or controller failure (JSON; needs the [sweep] extra)")
+                       "collision or controller failure (JSON; needs the [sweep] extra)",
+                       description="Runs every scenario file (or the SCENARIOs given) with "
+                       "--seeds seeds each on the study engine (a local Dask cluster, or "
+                       "--scheduler): no run may raise, collide or fail its controller. Prints "
+                       "one JSON object (runs, failures by kind, rows perception cleaned away) "
+                       "and exits 1 when a run broke the rule. With --out DIR the study's folder "
+                       "(results table, report.md, each run's folder) stays there and --resume "
+                       "continues it. Needs the sweep extra (pip install 'canalnav[sweep]').")
     p.add_argument("scenarios", nargs="*", metavar="SCENARIO",
                    help="scenario files (default: every *.toml in the package's scenarios/)")
     p.add_argument("--seeds", type=int, default=20, help="seeds per file (20)")

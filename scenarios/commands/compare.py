@@ -10,16 +10,18 @@ def register(sub) -> None:
         "compare", help="run the NMPC and the paper's two baselines on one scenario",
         description="Runs nmpc, los-pid (baseline 1: NMPC planner at 1 Hz + LOS-PID) and "
         "lexicographic (baseline 2: the paper's Appendix planner + LOS-PID) on the same "
-        "scenario and seed. Each run writes its own summary.json (and run.mcap, see canalnav "
-        "run) under DIR/<controller>; "
+        "scenario and seed. Each run writes its own summary.json (and with --mcap its run.mcap, "
+        "see canalnav run) under DIR/<controller>; "
         "DIR gets compare.md, compare.json and one separation plot of all three.",
     )
     p.add_argument("scenario", help="scenario file (TOML)")
     p.add_argument("--out", default=None, help="output folder (default runs/compare-<scenario>)")
     p.add_argument("--seed", type=int, default=None, help="noise seed (default: the scenario's)")
     p.add_argument("--controllers", default="nmpc,los-pid,lexicographic",
-                   help="comma-separated controllers to compare")
-    p.add_argument("--plant", default="fmu", help="plant: fmu (default) or python-model")
+                   help="comma-separated controllers to compare, of nmpc, los-pid, "
+                   "lexicographic and los-pid-waypoints (default nmpc,los-pid,lexicographic)")
+    p.add_argument("--plant", default="fmu", metavar="NAME",
+                   help="the boat simulated: fmu (default) or python-model")
     from scenarios.commands.run import add_viz_arguments
 
     add_viz_arguments(p, live=False)

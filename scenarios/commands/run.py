@@ -39,11 +39,11 @@ def add_viz_arguments(p, live: bool = True) -> None:
     """--mcap/--no-mcap, --mcap-points and (for a single run) --live."""
     from scenarios.results.mcap_log import DEFAULT_CLOUD_POINTS
 
-    p.add_argument("--mcap", action=argparse.BooleanOptionalAction, default=None,
-                   help="write run.mcap (Foxglove's schemas: frames, LiDAR cloud, walls, "
-                   "segments, plan, hull circles, tracks, GPS fix, per-step figures); default: "
-                   "when the viz extra is installed (pip install 'canalnav[viz]'), which --mcap "
-                   "then requires")
+    p.add_argument("--mcap", action=argparse.BooleanOptionalAction, default=False,
+                   help="write run.mcap for Foxglove (frames, LiDAR cloud, walls, segments, "
+                   "plan, hull circles, tracks, GPS fix, per-step figures); needs the viz extra "
+                   "(pip install 'canalnav[viz]'). Default: not written, as it is about 20 MB "
+                   "a simulated minute with the LiDAR cloud (--mcap-points 0: about 1 MB)")
     p.add_argument("--mcap-points", type=whole_number(0), default=DEFAULT_CLOUD_POINTS,
                    metavar="N", help="LiDAR points kept per scan for run.mcap and --live, "
                    f"every k-th (default {DEFAULT_CLOUD_POINTS}; 0: no cloud)")
@@ -60,19 +60,26 @@ def register(sub) -> None:
         "run", help="run a canal scenario in closed loop (FMU plant, simulated sensors)",
         description="Run a scenario: the boat FMU as plant, GPS/AHRS into an EKF, LiDAR "
         "detections (or known walls) into the controller at 10 Hz. Writes log.csv (as it "
-        "goes), summary.json, timing.json and PNG plots to --out, and run.mcap for Foxglove "
-        "when the viz extra is installed (pip install 'canalnav[viz]'). Exits 0 when the goal "
+        "goes), summary.json, timing.json and PNG plots to --out, and with --mcap run.mcap "
+        "for Foxglove (the viz extra: pip install 'canalnav[viz]'). Exits 0 when the goal "
         "is reached and every pass criterion holds, else 1.",
     )
     p.add_argument("scenario", help="scenario file (TOML), e.g. scenarios/pohang.toml")
-    p.add_argument("--controller", help="override the scenario's controller")
+    p.add_argument("--controller", metavar="NAME",
+                   help="override the scenario's controller: nmpc (the paper's NMPC), los-pid "
+                   "(baseline 1: the NMPC's planner at 1 Hz + LOS-PID), lexicographic "
+                   "(baseline 2: the paper's Appendix planner + LOS-PID) or los-pid-waypoints "
+                   "(LOS-PID on the waypoints, no planner: blind to walls)")
     p.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", type=_assignment,
                    help="change a scenario key by its dotted path, as a TOML value (e.g. "
                    "--set current.east_mps=0.2 --set plant.boat.Nr=-2500); repeatable")
     p.add_argument("--out", default=None, help="output folder (default runs/<scenario>-<controller>)")
     p.add_argument("--seed", type=seed_number, default=None,
                    help="noise seed, a whole number >= 0 (default: the scenario's)")
-    p.add_argument("--plant", default="fmu", help="plant: fmu (default), python-model, mavlink-sim")
+    p.add_argument("--plant", default="fmu", metavar="NAME",
+                   help="the boat simulated: fmu (default: the boat FMU), python-model (the "
+                   "CasADi model stepped in Python) or mavlink-sim (the FMU behind a simulated "
+                   "ArduPilot Rover, driven over MAVLink as canalnav bridge does)")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--water", choices=("estimated", "still", "true"), default=None,
                    help="what the NMPC knows of the current and its model's error: the on-line "
@@ -121,17 +128,15 @@ def run(args) -> int:
 
 
 def viz_request(args):
-    """--live as (host, port) (None without it); the viz extra checked for --live and --mcap,
-    and a note on stderr when run.mcap is skipped by default for want of it."""
-    from scenarios.results.foxglove_messages import VIZ_EXTRA, require_viz, viz_available
+    """--live as (host, port) (None without it); the viz extra checked for --live and --mcap.
+    run.mcap is written only with --mcap (see scenarios/README.md, "Looking at a run in
+    Foxglove": its size, and the same files on every install)."""
+    from scenarios.results.foxglove_messages import require_viz
     from scenarios.results.mcap_log import parse_live
 
     live = parse_live(args.live) if getattr(args, "live", None) else None
     if live is not None or args.mcap:
         require_viz()
-    elif args.mcap is None and not viz_available():
-        print(f"note: run.mcap not written: the Foxglove SDK is not installed ({VIZ_EXTRA})",
-              file=sys.stderr)
     return live
 
 

@@ -131,8 +131,8 @@ def run_scenario(scenario: Scenario, out_dir: Path, controller: str | None = Non
     """Run one scenario into `out_dir` (log.csv, summary.json, timing.json, PNG plots, and
     run.mcap). `parallel_perception` changes the wall time only, never the results;
     `events(t, text)` hears when the controller starts or stops waiting. `mcap`: write
-    run.mcap (default no, as studies and tests want; None: when the viz extra is installed,
-    as `canalnav run` asks; True without it: InputError naming it);
+    run.mcap (default no, as `canalnav run` without --mcap, studies and tests want; None: when
+    the viz extra is installed; True without it: InputError naming it);
     `live` (host, port): serve the run to Foxglove over WebSocket; `cloud_points`: points per
     LiDAR cloud in both (0: none). None of these changes the results. `invocation`: how the
     run was asked for (`canalnav run` gives its command line and --set overrides), kept in

@@ -1,1 +1,2 @@
-"""What a run shows: metrics, detection scores and plots."""
+"""What a run shows: metrics, detection scores, encounters, plots, and run.mcap and the live
+view for Foxglove."""

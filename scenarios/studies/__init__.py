@@ -1,1 +1,2 @@
-"""Several runs side by side: the paper's comparison."""
+"""Many runs: the paper's comparison (`canalnav compare`), studies on Dask with their report
+(`canalnav sweep`), seeded encounters (`fuzz`) and the soak (`bench soak`)."""

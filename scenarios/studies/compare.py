@@ -24,10 +24,10 @@ COLUMNS = (
 
 
 def compare(scenario: Scenario, out_dir: Path, controllers=COMPARED, seed: int | None = None,
-            plant: str = "fmu", progress=None, mcap: bool | None = None,
+            plant: str = "fmu", progress=None, mcap: bool | None = False,
             cloud_points: int | None = None) -> list[dict]:
-    """Run each controller into out_dir/<controller> (each with its run.mcap, see
-    `run_scenario`); return one row of figures per run."""
+    """Run each controller into out_dir/<controller> (each with its run.mcap when `mcap`,
+    see `run_scenario`); return one row of figures per run."""
     out_dir = Path(out_dir)
     rows, runs = [], {}
     for name in controllers:

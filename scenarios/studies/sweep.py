@@ -235,8 +235,9 @@ def finished_rows(out_dir: Path, study: Study) -> list[dict]:
 # -- progress -----------------------------------------------------------------------------
 @dataclass
 class Progress:
-    """A progress line on stderr: runs done of all, failing (raised, or not a success),
-    the rate and the time left; redrawn in place on a terminal, a line per run elsewhere."""
+    """A progress line on stderr: runs done of all, failing (raised, or not a success; with
+    --resume the kept runs' failures included), the rate and the time left; redrawn in place
+    on a terminal, a line per run elsewhere."""
 
     total: int
     skipped: int = 0
@@ -417,7 +418,9 @@ def run_study(study: Study, out_dir, *, client=None, scheduler: str | None = Non
     try:
         _start_folder(study, out_dir)
         table = ResultsTable(out_dir, study, kept)
-        bar = Progress(len(study.runs), len(kept), stream) if progress else None
+        # the kept runs count in the line as in the table: failing ones stay failing
+        bar = Progress(len(study.runs), len(kept), stream,
+                       failed=sum(not r.get("success") for r in kept)) if progress else None
         try:
             if todo:
                 n_workers = _worker_count(client)

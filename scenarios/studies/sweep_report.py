@@ -10,7 +10,6 @@ reproduces each one (`canalnav run FILE --seed S --set PATH=VALUE ...`).
 from __future__ import annotations
 
 import math
-import os
 import re
 import shlex
 from pathlib import Path
@@ -27,13 +26,10 @@ def value_label(v) -> str:
 
 
 def reproduce_command(row: dict) -> str:
-    """The `canalnav run` line that makes this run again, with plots, in runs/."""
-    file = row["scenario_file"]
-    try:
-        rel = os.path.relpath(file)
-        file = rel if not rel.startswith("..") else str(Path(file).resolve())
-    except ValueError:  # another drive
-        pass
+    """The `canalnav run` line that makes this run again, with plots, in runs/. The scenario
+    is the file the study ran (its path resolved from the study file's folder), named by its
+    absolute path: the line works from any folder, not only from where the study started."""
+    file = str(Path(row["scenario_file"]).resolve())
     parts = ["canalnav", "run", file, "--seed", str(row["seed"]), "--controller",
              row["controller"]]
     for path, value in row.get("overrides", []):
@@ -53,11 +49,8 @@ def _q(a: np.ndarray, q: float) -> str:
 
 def factor_table(rows: list[dict], factor: str) -> list[dict]:
     """Per value of a factor: runs, raised, success rate, soak passes, clearance and J_c."""
-    groups: dict[str, list] = {}
-    for r in rows:
-        groups.setdefault(value_label(r.get(factor)), []).append(r)
     out = []
-    for label, rs in groups.items():
+    for label, rs in _groups(rows, factor).items():
         clear, jc = _figures(rs, "min_clearance_m"), _figures(rs, "control_effort_Jc")
         out.append({
             "value": label, "runs": len(rs),
@@ -70,6 +63,28 @@ def factor_table(rows: list[dict], factor: str) -> list[dict]:
             "jc_median": _q(jc, 0.5), "jc_p90": _q(jc, 0.9),
         })
     return out
+
+
+def _order(v):
+    """Sort key of a factor's values: numbers by value (0.0 before 0.2), then the rest by
+    their label (scenario and controller names alphabetically)."""
+    if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v):
+        return (0, float(v), "")
+    return (1, 0.0, value_label(v) if v is not None else "")
+
+
+def _groups(rows: list[dict], factor: str) -> dict[str, list]:
+    """The runs by their value of the factor, in the values' order (`_order`)."""
+    groups: dict[str, list] = {}
+    for r in sorted(rows, key=lambda r: _order(r.get(factor))):
+        groups.setdefault(value_label(r.get(factor)), []).append(r)
+    return groups
+
+
+def least_clearance_count(n: int) -> int:
+    """How many runs "Least clearance" lists of n: the closest tenth, at least 3, at most
+    WORST (a list of nearly every run says nothing about the worst)."""
+    return min(n, WORST, max(3, math.ceil(n / 10)))
 
 
 def _pct(k: int, n: int) -> str:
@@ -182,10 +197,13 @@ def _worst(rows: list[dict]) -> list[str]:
         out.append("")
     ok = [r for r in rows if r["status"] == "ok" and r.get("min_clearance_m") is not None]
     if ok:
-        out += ["## Least clearance", ""]
+        k = least_clearance_count(len(ok))
+        out += ["## Least clearance", "",
+                f"The {k} of {len(ok)} finished runs that came closest to a wall or a vessel "
+                "(results.csv has every run's):", ""]
         out += [entry(r, f"min clearance {r['min_clearance_m']:.2f} m, "
                       f"{r['time_below_desired_s']} s below R_b + d_p, {r['outcome']}")
-                for r in sorted(ok, key=lambda r: r["min_clearance_m"])[:WORST]]
+                for r in sorted(ok, key=lambda r: r["min_clearance_m"])[:k]]
         out.append("")
     return out
 
@@ -194,9 +212,7 @@ def _plot_factor(rows: list[dict], factor: str, out_dir: Path) -> Path | None:
     """factor-<name>.png: success rate, min clearance and J_c for each value of the factor."""
     from scenarios.results.plots import _pyplot
 
-    groups: dict[str, list] = {}
-    for r in rows:
-        groups.setdefault(value_label(r.get(factor)), []).append(r)
+    groups = _groups(rows, factor)
     if not groups:
         return None
     labels = list(groups)

@@ -76,3 +76,38 @@ def test_detect_without_lidar_is_still_the_simulated_scan(tmp_path, capsys):
     out = tmp_path / "sim.png"
     assert main(["detect", "--at", "95", "-o", str(out)]) == 0
     assert "covered" in capsys.readouterr().out
+
+
+def test_a_ros_bag_alone_sits_on_ros_convention_by_default(tmp_path, capsys):
+    """Issue 35: a ROS 2 bag of PointCloud2 in ROS's convention (x forward, y left, z up) read
+    by `detect --lidar rosbag:BAG` on the default mount gave 0 points after the crop and 0
+    segments: a source of known convention alone now sits on it (roll 180 deg) unless the
+    scenario gives a [sensors.replay_mount]."""
+    from types import SimpleNamespace
+
+    from bridge.lidar.rosbag_write import write_bag
+
+    sim = simulator()
+    sweeps = [(1.0 + 0.1 * k, sweep_ros(sim, (POSE[0] + 0.2 * k, POSE[1], POSE[2])), None)
+              for k in range(3)]
+    bag = write_bag(tmp_path / "bag", sweeps, "/points", 2)
+    out, csv = tmp_path / "d.png", tmp_path / "d.csv"
+    assert main(["detect", "--lidar", f"rosbag:{bag}", "--at", "0.1", "-o", str(out),
+                 "--csv", str(csv)]) == 0
+    captured = capsys.readouterr()
+    assert "the crop kept none" not in captured.err
+    kept = int(captured.out.split(" after the crop")[0].rsplit(" ", 1)[1])
+    got = np.loadtxt(csv, delimiter=",", skiprows=1).reshape(-1, 4)
+    assert kept > 1000 and len(got) >= 2, captured.out
+    # the two quays, heading 0.1 rad to starboard of the canal: in the boat's frame they run
+    # 0.1 rad to port (read without the roll, y left for starboard, they ran to starboard)
+    quays = got[np.argsort(-got[:, 3])[:2]]
+    assert np.allclose(quays[:, 2], -POSE[2], atol=0.02), got
+    # the scenario's own mount wins; recorded scans keep it, zeros and all
+    from bridge.lidar.sources import DRIVER_MOUNT, default_mount
+
+    bow = SimpleNamespace(replay_mount=BOW_MOUNT)
+    none = SimpleNamespace(replay_mount=(0.0,) * 6)
+    assert default_mount("rosbag", bow) == tuple(BOW_MOUNT)
+    assert default_mount("velodyne", none) == DRIVER_MOUNT
+    assert default_mount("replay", none) == (0.0,) * 6

@@ -214,3 +214,29 @@ def test_lifecycle_check_notices_a_state_that_does_not_restore(fmus, monkeypatch
     monkeypatch.setattr(FmuBoat, "set_state", lambda self, state: None)
     problems = check.lifecycle_problems(fmus[3])
     assert any("get/set FMU state" in p for p in problems)
+
+
+def test_the_readmes_fmpy_example_writes_its_output(fmus, tmp_path):
+    """Issue 35: the README's `fmpy simulate boat.fmu ...` printed and wrote nothing. Each
+    `fmpy` line of fmu/README.md, run on the built FMU, writes the file it names."""
+    import re
+    import shlex
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    readme = (Path(__file__).resolve().parents[2] / "fmu" / "README.md").read_text()
+    lines = [ln for block in re.findall(r"```sh\n(.*?)```", readme, re.S)
+             for ln in block.splitlines() if ln.startswith("fmpy ")]
+    assert lines
+    shutil.copy(fmus[3], tmp_path / "boat.fmu")
+    for line in lines:
+        words = shlex.split(line)
+        assert "--output-file" in words, f"{line}: writes nothing"
+        out = tmp_path / words[words.index("--output-file") + 1]
+        exe = Path(sys.executable).with_name("fmpy")
+        subprocess.run([str(exe), *words[1:]], cwd=tmp_path, check=True, timeout=120,
+                       capture_output=True)
+        rows = out.read_text().splitlines()
+        assert rows[0].startswith('"time"') and len(rows) > 50, line

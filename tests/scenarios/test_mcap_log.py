@@ -292,6 +292,6 @@ def test_without_the_extra_mcap_and_live_name_it_and_the_rest_works(tmp_path, mo
         run_scenario(sc, tmp_path / "a", plant="python-model", plots=False, mcap=False,
                      live=("127.0.0.1", 0))
     r = run_scenario(sc, tmp_path / "b", plant="python-model", plots=False,
-                     parallel_perception=False, mcap=None)  # as `canalnav run` by default
+                     parallel_perception=False, mcap=None)  # when the extra is there
     assert r.summary["steps"] == 10 and not (tmp_path / "b" / "run.mcap").exists()
     assert main(["run", str(STRAIGHT), "--live", "8765", "--out", str(tmp_path / "c")]) == 2

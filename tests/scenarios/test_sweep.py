@@ -357,3 +357,68 @@ def test_without_dask_the_error_names_the_extra(tiny, tmp_path, monkeypatch, cap
     assert main(["sweep", str(spec), "--out", str(tmp_path / "o"), "--workers", "2",
                  "--scheduler", "tcp://127.0.0.1:1"]) == 2
     assert "--workers sizes the local cluster" in capsys.readouterr().err
+
+
+# -- report.md and the progress line: issue 35's papercuts ----------------------------------
+def _fake_outcome(study, make_row):
+    from types import SimpleNamespace
+
+    rows = [make_row(i, r) for i, r in enumerate(study.runs)]
+    return SimpleNamespace(rows=rows, executed=[r["run_id"] for r in rows], skipped=0,
+                           where="a test", wall_s=60.0)
+
+
+def test_the_report_sorts_values_lists_the_closest_runs_and_runs_from_anywhere(
+        tiny, tmp_path, monkeypatch):
+    """Issue 35: factor values unsorted (0.2 before 0.0), "Least clearance" listing 10 of 12
+    runs, reproduce commands naming a scenario path that held only from the study's folder."""
+    from scenarios.studies.sweep_report import write_report
+
+    body = GRID.replace("current.east_mps = [0.0, 0.2]", "current.east_mps = [0.2, 0.0, 0.1]")
+    study = load_study(study_file(tmp_path, body.replace("count = 3", "count = 2")))
+    assert len(study.runs) == 12
+
+    def row(i, spec):
+        return dict({p: v for p, v in spec.overrides}, run_id=spec.run_id,
+                    scenario=spec.scenario, seed=spec.seed, controller=spec.controller,
+                    status="ok", success=True, soak_passed=True, collision=False,
+                    controller_failed=False, min_clearance_m=5.0 + i, control_effort_Jc=100.0,
+                    time_below_desired_s=0.0, outcome="reached goal",
+                    scenario_file=spec.scenario_file)
+
+    out = tmp_path / "out"
+    out.mkdir()
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(tmp_path)  # the study's folder: its scenario path is "tiny.toml" here
+    report = write_report(study, _fake_outcome(study, row), out).read_text()
+    by_current = report.split("## By current.east_mps")[1].split("##")[0]
+    values = [line.split("|")[1].strip() for line in by_current.splitlines()
+              if line.startswith("| 0.")]
+    assert values == ["0.0", "0.1", "0.2"], values
+    least = report.split("## Least clearance")[1]
+    listed = [line for line in least.splitlines() if line.startswith("- `")]
+    assert len(listed) == 3 and "The 3 of 12 finished runs" in least
+    command = least.split("  `canalnav run ")[1].split("`")[0]
+    monkeypatch.chdir(elsewhere)  # the command, run from another folder, finds the file
+    assert Path(command.split()[0]).is_file(), command
+
+
+def test_after_resume_the_progress_line_counts_the_kept_failures(tiny, tmp_path,
+                                                                 threads_client):
+    """Issue 35: after --resume the failing count restarted at 0."""
+    import io
+
+    body = GRID.replace("count = 3", "count = 1").replace("controller.d_p_m = [2, 3]\n", "")
+    body = body.replace("[overrides]\n", "[overrides]\nscenario.duration_s = [2]\n")
+    study = load_study(study_file(tmp_path, body))  # 2 runs of 2 s: neither reaches the goal
+    out = tmp_path / "out"
+
+    def interrupt(row, client):
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        sweep.run_study(study, out, client=threads_client, progress=False, on_row=interrupt)
+    stream = io.StringIO()
+    sweep.run_study(study, out, client=threads_client, resume=True, stream=stream)
+    assert "2/2 runs, 2 failing (0 raised)" in stream.getvalue(), stream.getvalue()
