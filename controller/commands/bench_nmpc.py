@@ -116,11 +116,15 @@ def _summary(run, label: str) -> dict:
 def _vessel_cases(config, qp, canal, x0, act0, args) -> dict:
     """RTI on the same canal without vessel slots, with them and no vessel, with them and a
     tour boat meeting the boat on the first leg, keeping to its own starboard side (the two
-    pass port to port), and with them and two vessels that leave no room: a tour boat coming
-    down the middle of the first leg (the boat must back off before it for most of the run,
-    its clearance given up at many stages) and a launch crossing that leg; in one session,
-    the one-phase step (`split=False`), so that each case's time is its whole step."""
+    pass port to port), and with them and two vessels: a tour boat coming down the first leg
+    3 m off its middle (room for the two to pass only with less than R_b + d_v beside it:
+    the boat keeps to starboard and passes, some of the vessel's clearance given up) and a
+    launch crossing that leg; in one session, the one-phase step (`split=False`), so that
+    each case's time is its whole step. `least_distance_to_vessel_m`: the least distance
+    from the boat's origin to a vessel's centre."""
     from dataclasses import replace
+
+    import numpy as np
 
     from controller.nmpc.bench import BenchVessel, closed_loop
     from controller.nmpc.controller import NmpcController
@@ -145,6 +149,9 @@ def _vessel_cases(config, qp, canal, x0, act0, args) -> dict:
                                        "max_slack_m", "final_state", "failed_steps",
                                        "fallback_steps", "stopped_by_failure")}
         out[name]["vessel_slots"] = cfg.vessel_slots
+        out[name]["least_distance_to_vessel_m"] = round(min(
+            (float(np.hypot(*(run.states[k, :2] - v.at(k * config.control_period_s).position)))
+             for k in range(len(run.states)) for v in vs), default=float("inf")), 3)
     base = out["no_vessel_slots"]["mean_ms"]
     out["ratio_mean_over_no_vessel_slots"] = {
         k: round(v["mean_ms"] / base, 2) for k, v in out.items() if k != "no_vessel_slots"}

@@ -496,7 +496,11 @@ class NmpcController:
         selection = select_checked(segs, x[:2], c.segment_slots, c.segment_range_m, planned)
         slots = self._keep_slots(selection.slots)
         vessel_sel = predict_vessels(vessels, c.vessel_slots, c.horizon, c.step_s, planned,
-                                     x[:2])
+                                     x[:2], max_lateral_inflation_m=c.vessel_lateral_inflation_m,
+                                     path=self._path, path_window=(self._progress_m - 80.0,
+                                                                   self._progress_m + 150.0),
+                                     lanes=frozenset(e.track_id for e in rules.encounters
+                                                     if e.kind == "meeting" and e.lane))
         p, lay = buffers.p, self._layout  # filled in place: every part is written each step
         p[lay.vessels] = vessel_sel.slots.reshape(-1)
         p[lay.current] = inputs.current

@@ -102,6 +102,9 @@ class NmpcConfig:
     segment_range_m: float = 50.0  # segments farther than this are left out
     vessel_slots: int = 4  # other vessels avoided over the horizon (`vessel_slots`)
     vessel_separation_m: float = 2.0  # d_v: kept beyond R_b from a vessel's (inflated) hull
+    # how much a vessel's predicted hull may widen with its track's uncertainty over the
+    # horizon (its length may grow up to 6 m): in a canal a vessel keeps its side
+    vessel_lateral_inflation_m: float = 1.0
     colreg: bool = True  # shape the reference by the rules of the road (`seamanship`)
     follow_gap_m: float = 20.0  # behind a vessel there is no room to overtake: bow to its stern
     bow_m: float = 3.95  # from the boat's origin to its bow (the 7.9 m hull)
@@ -147,7 +150,7 @@ class NmpcConfig:
         ):
             bad("terminal_factor", "must be a non-negative number or None")
         for name in ("slack_weight", "separation_m", "hessian_regularisation",
-                     "vessel_separation_m"):
+                     "vessel_separation_m", "vessel_lateral_inflation_m"):
             if getattr(self, name) < 0:
                 bad(name, "must not be negative")
         for name in ("stop_margin_m", "resume_after_s"):

@@ -41,6 +41,10 @@ class Encounter:
     track_id: object
     kind: str  # meeting | overtaking | following | give_way | stand_on | astern | clear
     distance_m: float  # along the route, its centre from the boat (< 0: behind)
+    # meeting: the channel leaves the hull room to pass it on its port side all the way to
+    # it (d_v beside it, R_b to the wall: `lane_room`), so its lane counts as taken for the
+    # whole horizon (`vessel_slots`); without room the boat holds back from its hull
+    lane: bool = False
 
 
 @dataclass(frozen=True)
@@ -116,6 +120,9 @@ def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed
             move = max(min(0.5 * stbd0, room), 0.0) if math.isfinite(stbd0) else Rb + dp
             meet_offset = max(meet_offset, move)
             reasons.append(f"meeting {tr.id}: keep to starboard")
+            lane = lane_room(path, progress_m, s, d + half_wid, segs) >= dv + 2 * Rb
+            encounters.append(Encounter(tr.id, kind, ahead, lane))
+            continue
         elif ahead > 0 and along < speed_mps - 0.3:
             kind = "overtaking"  # or following, decided below
             xy_v, _ = path.at(s)
@@ -149,6 +156,17 @@ def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed
     if speed_cap is not None:
         speed_cap = max(speed_cap, 0.0)
     return Shaping(offset, speed_cap, stop, "; ".join(reasons), tuple(encounters))
+
+
+def lane_room(path: WaypointPath, s_boat: float, s_vessel: float, edge_m: float, segs,
+              samples: int = 6) -> float:
+    """The least room (m) to starboard of a vessel met head-on, from its starboard edge
+    (`edge_m` across the route, + to starboard) to the starboard wall, at `samples` places
+    from the boat to the vessel: where the two may pass (inf: no wall seen)."""
+    s = np.linspace(s_boat, s_vessel, samples)
+    xy, heading = path.at(s)
+    _, stbd = walls_abeam(xy, heading, segs)
+    return float(np.min(stbd - edge_m))
 
 
 def _room(xy, heading, offset_m, segs) -> tuple[float, float]:

@@ -23,9 +23,11 @@ def test_bench_nmpc_prints_times_ratios_and_the_goal(capsys):
     assert "ipopt/rti>=30" in out["goal"]  # False here: IPOPT did not run
     assert out["goal"]["ipopt/rti>=30"] is False
     # the vessel cases: the tour boat met port to port is passed (the boat goes on round the
-    # bend), the one down the middle of the leg leaves no room and the boat backs off
+    # bend); the one 3 m off the middle of the leg is passed too, the boat on its own side
+    # (its centre 6 m or more from the vessel's: 3 m hull to hull), not backed away from
     vessels = out["vessels"]
-    meeting, blocking = vessels["vessel_slots_meeting"], vessels["vessel_slots_two_vessels"]
-    assert meeting["failed_steps"] == blocking["failed_steps"] == 0
-    assert meeting["final_state"][0] > 60.0 and blocking["final_state"][0] < 0.0
+    meeting, passing = vessels["vessel_slots_meeting"], vessels["vessel_slots_two_vessels"]
+    assert meeting["failed_steps"] == passing["failed_steps"] == 0
+    assert meeting["final_state"][0] > 60.0 and passing["final_state"][0] > 20.0
+    assert passing["least_distance_to_vessel_m"] > 6.0
     assert set(vessels["goal"]) == {"vessel_slots_meeting", "vessel_slots_two_vessels"}
