@@ -5,11 +5,16 @@ rules decide where the reference asks it to be, so that it passes the way other 
 
 - Meeting (Rules 9 and 14): a vessel ahead coming the other way: keep to the starboard side
   of the channel, so the two pass port to port. The reference path moves to starboard by half
-  of the room on that side, never closer than R_b + d_p to the starboard wall.
+  of the room on that side, never closer than R_b + d_p to the starboard wall. Where the
+  channel leaves the hull room beside the vessel all the way to it, its lane counts as taken
+  for the whole horizon (`Encounter.lane`, `vessel_slots`), so the plan keeps to its side
+  instead of backing away from a vessel it can pass.
 - Overtaking (Rules 9(e) and 13): a slower vessel ahead going the same way: pass it on its port
   side where the channel leaves room beside it (two hull circles and both separations, 2 R_b
-  + d_v + d_p), else on its starboard side; with room on neither, follow it: no faster than
-  it goes, and stop short of it by `follow_gap_m` (its stern to our bow).
+  + d_v + d_p), else on its starboard side; with room on neither, or a bend of more than
+  `bend_deg` before the boat would be past it (Rule 9(f): what comes round the bend is not
+  seen), follow it: no faster than it goes, and stop short of it by `follow_gap_m` (its
+  stern to our bow).
 - Crossing (Rule 15): a vessel that will cross the route ahead from the starboard side while
   the boat would be there is given way to by slowing: the reference stops short of the
   crossing point until the vessel has cleared it (passing astern of it). A small craft
@@ -61,7 +66,7 @@ class Shaping:
 def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed_mps: float,
            segments, *, hull_radius_m: float, separation_m: float, vessel_separation_m: float,
            bow_m: float, follow_gap_m: float = 20.0, lookahead_m: float = 70.0,
-           small_craft_m: float = 6.0) -> Shaping:
+           small_craft_m: float = 6.0, bend_deg: float = 20.0) -> Shaping:
     """The reference shaping for the tracked vessels (`perception.tracking.Track`-like:
     position, velocity, length_m, width_m, id); segments give the channel's walls."""
     if not tracks:
@@ -97,7 +102,7 @@ def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed
             kind = "astern" if ahead < 0 else "clear"
         elif abs(d) > half_wid + Rb + dv + 8.0 and abs(across) < 0.2:
             kind = "clear"  # well aside and not closing: moored, or on another channel
-        elif _crossing(d, across, half_wid):
+        elif _crossing(d, along, across, half_wid):
             crossing = _conflict(ahead, d, along, across, half_len, half_wid, speed_mps,
                                  Rb + dv + bow_m)
             if crossing is not None:
@@ -133,10 +138,24 @@ def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed
                               (d - half_wid) + port, stbd - (d + half_wid), len(encounters),
                               port, stbd))
         encounters.append(Encounter(tr.id, kind, ahead))
-    # Overtake only with room beside the vessel and nobody coming the other way.
+    # Overtake only with room beside the vessel, nobody coming the other way, and the
+    # channel straight until the boat is past (Rule 9(f): round a bend a vessel coming the
+    # other way is out of sight until it is there).
     need = 2 * Rb + dv + dp
     for tr, s, d, half_len, half_wid, along, port_gap, stbd_gap, k, port, stbd in overtakes:
         side = None
+        past = (s - progress_m) + half_len + bow_m + follow_gap_m  # to be clear ahead of it
+        travel = speed_mps * past / max(speed_mps - along, 0.1)  # the boat's way meanwhile
+        alongside = (s - progress_m) - half_len < bow_m  # its stern behind our bow: go on
+        if not alongside and not _straight(path, progress_m,
+                                           progress_m + min(travel, 2 * lookahead_m),
+                                           math.radians(bend_deg)):
+            encounters[k] = Encounter(tr.id, "following", encounters[k].distance_m)
+            speed_cap = along if speed_cap is None else min(speed_cap, along)
+            at = s - half_len - bow_m - follow_gap_m
+            stop = at if stop is None else min(stop, at)
+            reasons.append(f"following {tr.id}: a bend ahead before the boat would be past")
+            continue
         if meet_offset == 0.0 and port_gap >= need:  # the boat's place: clear of both
             side, target = "port", max(d - half_wid - dv - Rb, -(port - Rb - dp))
         elif meet_offset == 0.0 and stbd_gap >= need:
@@ -156,6 +175,13 @@ def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed
     if speed_cap is not None:
         speed_cap = max(speed_cap, 0.0)
     return Shaping(offset, speed_cap, stop, "; ".join(reasons), tuple(encounters))
+
+
+def _straight(path: WaypointPath, s0: float, s1: float, max_turn_rad: float) -> bool:
+    """The route turns by no more than `max_turn_rad` between arc lengths s0 and s1 (its
+    headings are unwrapped along it)."""
+    _, heading = path.at(np.linspace(s0, max(s0, s1), 9))
+    return float(np.max(np.abs(heading - heading[0]))) <= max_turn_rad
 
 
 def lane_room(path: WaypointPath, s_boat: float, s_vessel: float, edge_m: float, segs,
@@ -180,9 +206,12 @@ def _room(xy, heading, offset_m, segs) -> tuple[float, float]:
     return float(port[0]), float(stbd[0])
 
 
-def _crossing(d: float, across: float, half_wid: float) -> bool:
-    """The vessel is aside of the route and moving toward it (or across it)."""
-    return abs(across) > 0.2 and (d * across < 0 or abs(d) <= half_wid)
+def _crossing(d: float, along: float, across: float, half_wid: float) -> bool:
+    """The vessel is aside of the route and moving toward it (or across it), on a course
+    more than about 27 degrees off the route's: a vessel met or overtaken in the channel
+    drifts across it too, and a track's velocity has noise, but that is no crossing."""
+    return (abs(across) > max(0.2, 0.5 * abs(along))
+            and (d * across < 0 or abs(d) <= half_wid))
 
 
 def _conflict(ahead, d, along, across, half_len, half_wid, speed, reach):

@@ -1,0 +1,80 @@
+"""The rules of the road as the reference shaping reads them (`controller.nmpc.seamanship`):
+each case one vessel on a straight or bent 20 m channel, the boat at its start."""
+
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from controller.geometry import Polyline
+from controller.nmpc.reference import WaypointPath
+from controller.nmpc.seamanship import assess
+
+
+@dataclass
+class Track:
+    id: int
+    position: tuple
+    velocity: tuple
+    length_m: float = 7.0
+    width_m: float = 2.2
+
+
+def _channel(points, half_width=10.0):
+    """A route through `points` (x north, y east) and its two walls, as segments (x_c, y_c,
+    theta, length)."""
+    pts = np.asarray(points, float)
+    segs = []
+    for a, b in zip(pts[:-1], pts[1:]):
+        length = float(np.hypot(*(b - a)))
+        theta = float(np.arctan2(*(b - a)[::-1]))
+        n = np.array([-np.sin(theta), np.cos(theta)]) * half_width
+        mid = 0.5 * (a + b)
+        segs += [[*(mid + n), theta, length], [*(mid - n), theta, length]]
+    return WaypointPath.from_polyline(Polyline(pts)), np.array(segs)
+
+
+def _kind(track, points=((0, 0), (300, 0)), speed=2.0):
+    path, segs = _channel(points)
+    shaping = assess([track], path, 0.0, 0.0, speed, segs, hull_radius_m=2.0,
+                     separation_m=2.0, vessel_separation_m=2.0, bow_m=2.0)
+    return shaping.encounters[0].kind, shaping
+
+
+@pytest.mark.parametrize("across", [-0.3, 0.0, 0.3])
+def test_a_vessel_met_head_on_is_met_whatever_its_drift_across(across):
+    """A track coming the other way 4 m to port with a few tenths of a metre a second of
+    drift (a track's velocity noise) is a meeting, not a vessel crossing from port (which
+    the boat would stand on for, keeping to the middle: it did, with the LiDAR, and passed
+    starboard to starboard 1.3 m off)."""
+    kind, shaping = _kind(Track(2, (35.0, -4.0), (-1.8, across)))
+    assert kind == "meeting"
+    assert shaping.offset_m > 0.0  # to starboard
+
+
+def test_a_vessel_crossing_from_starboard_is_given_way_to():
+    kind, shaping = _kind(Track(4, (30.0, 15.0), (0.0, -1.5)))
+    assert kind == "give_way"
+    assert shaping.stop_at_m is not None and shaping.stop_at_m < 30.0
+
+
+def test_a_vessel_crossing_from_port_is_stood_on_for():
+    kind, shaping = _kind(Track(4, (30.0, -15.0), (0.0, 1.5)))
+    assert kind == "stand_on"
+    assert shaping.stop_at_m is None
+
+
+def test_a_slow_vessel_on_a_straight_is_overtaken_on_its_port_side():
+    kind, shaping = _kind(Track(3, (30.0, 4.0), (0.8, 0.0)))
+    assert kind == "overtaking"
+    assert shaping.offset_m < 0.0 and shaping.speed_mps is None
+
+
+def test_no_overtaking_before_a_bend():
+    """Rule 9(f): with the route turning 40 degrees 40 m on, the boat would not be past the
+    vessel before the bend, so it follows it instead."""
+    bend = ((0, 0), (70, 0), (70 + 100 * np.cos(0.7), 100 * np.sin(0.7)))
+    kind, shaping = _kind(Track(3, (30.0, 4.0), (0.8, 0.0)), points=bend)
+    assert kind == "following"
+    assert shaping.speed_mps == pytest.approx(0.8)
+    assert shaping.stop_at_m is not None
