@@ -276,6 +276,7 @@ class NmpcController:
         self.consecutive_failures = 0
         self._way.reset()
         self._rules_stop: Shaping | None = None
+        self._giving_way: frozenset = frozenset()  # track ids given way to last period
         self._rules_clear_s = 0.0
         self._prepared: _Prepared | None = None
         self._inputs: _Inputs | None = None  # the last step's, for the next preparation
@@ -516,10 +517,11 @@ class NmpcController:
     def _memory(self) -> tuple:
         """What `_setup` moves on, to be put back when a prepared setup goes unused."""
         return (self._way.memory(), self._rules_stop, self._rules_clear_s, self._slots_prev,
-                self._slot_at)
+                self._slot_at, self._giving_way)
 
     def _restore(self, memory: tuple) -> None:
-        way, self._rules_stop, self._rules_clear_s, self._slots_prev, self._slot_at = memory
+        (way, self._rules_stop, self._rules_clear_s, self._slots_prev, self._slot_at,
+         self._giving_way) = memory
         self._way.restore(way)
 
     def _rules(self, s: float, d: float, vessels, segments, speed_mps: float,
@@ -534,7 +536,9 @@ class NmpcController:
                            hull_radius_m=c.hull_radius_m,
                            separation_m=c.separation_m,
                            vessel_separation_m=c.vessel_separation_m, bow_m=c.bow_m,
-                           follow_gap_m=c.follow_gap_m)
+                           follow_gap_m=c.follow_gap_m, give_way_to=self._giving_way)
+        self._giving_way = frozenset(e.track_id for e in rules.encounters
+                                     if e.kind == "give_way")
         if rules.stop_at_m is not None:
             self._rules_stop, self._rules_clear_s = rules, 0.0
         elif self._rules_stop is not None:

@@ -18,7 +18,10 @@ rules decide where the reference asks it to be, so that it passes the way other 
 - Crossing (Rule 15): a vessel that will cross the route ahead from the starboard side while
   the boat would be there is given way to by slowing: the reference stops short of the
   crossing point until the vessel has cleared it (passing astern of it). A small craft
-  (shorter than `small_craft_m`: a kayak, a rowing boat) is given way to from either side.
+  (shorter than `small_craft_m`: a kayak, a rowing boat) is given way to from either side,
+  and a vessel once given way to stays so until it has crossed (Rule 8: a track first seen
+  short grows as its hull comes out from behind a corner; the boat does not then change its
+  mind and speed up into it).
 - Stand on (Rule 17): a vessel crossing from port keeps out of our way: course and speed stay
   as planned (the vessel slot still keeps the boat clear if it does not).
 
@@ -66,9 +69,11 @@ class Shaping:
 def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed_mps: float,
            segments, *, hull_radius_m: float, separation_m: float, vessel_separation_m: float,
            bow_m: float, follow_gap_m: float = 20.0, lookahead_m: float = 70.0,
-           small_craft_m: float = 6.0, bend_deg: float = 20.0) -> Shaping:
+           small_craft_m: float = 6.0, bend_deg: float = 20.0,
+           give_way_to: frozenset = frozenset()) -> Shaping:
     """The reference shaping for the tracked vessels (`perception.tracking.Track`-like:
-    position, velocity, length_m, width_m, id); segments give the channel's walls."""
+    position, velocity, length_m, width_m, id); segments give the channel's walls;
+    `give_way_to`: ids the boat gave way to at the last period."""
     if not tracks:
         return Shaping()
     segs = np.asarray(segments, float).reshape(-1, 4)
@@ -108,7 +113,10 @@ def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed
             if crossing is not None:
                 small = float(tr.length_m) < small_craft_m
                 from_starboard = across < 0  # it moves to port: it comes from starboard
-                if from_starboard or small:  # give way (to a small craft from either side)
+                # give way (to a small craft from either side); a decision to give way
+                # stands while the conflict lasts (Rule 8: no back and forth), though the
+                # track grows out of small craft as more of its hull comes into view
+                if from_starboard or small or tr.id in give_way_to:
                     kind = "give_way"
                     at = progress_m + crossing - (Rb + dv + bow_m + half_wid)
                     stop = at if stop is None else min(stop, at)

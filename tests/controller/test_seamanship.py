@@ -78,3 +78,21 @@ def test_no_overtaking_before_a_bend():
     assert kind == "following"
     assert shaping.speed_mps == pytest.approx(0.8)
     assert shaping.stop_at_m is not None
+
+
+def test_a_vessel_given_way_to_stays_so_while_it_crosses():
+    """A workboat coming out of a side canal on the port side is first seen short (its bow
+    round the corner): a small craft, given way to. As its hull comes into view it is 9 m
+    long, which alone would be stood on for; the decision stands (Rule 8)."""
+    path, segs = _channel(((0, 0), (300, 0)))
+    kw = dict(hull_radius_m=2.0, separation_m=2.0, vessel_separation_m=2.0, bow_m=2.0)
+    short = assess([Track(3, (30.0, -15.0), (0.0, 1.5), length_m=3.0)], path, 0.0, 0.0, 2.0,
+                   segs, **kw)
+    assert short.encounters[0].kind == "give_way"
+    grown = Track(3, (30.0, -12.0), (0.0, 1.5), length_m=9.0)
+    assert assess([grown], path, 0.0, 0.0, 2.0, segs, **kw).encounters[0].kind == "stand_on"
+    kept = assess([grown], path, 0.0, 0.0, 2.0, segs, give_way_to=frozenset({3}), **kw)
+    assert kept.encounters[0].kind == "give_way" and kept.stop_at_m is not None
+    gone = Track(3, (30.0, 20.0), (0.0, 1.5), length_m=9.0)  # crossed: nothing to give way to
+    assert assess([gone], path, 0.0, 0.0, 2.0, segs, give_way_to=frozenset({3}),
+                  **kw).encounters[0].kind != "give_way"
