@@ -215,6 +215,8 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
     lines = segments[walls]
     if known_walls is not None and len(known_walls):
         lines = np.concatenate([lines, np.asarray(known_walls)[:, :4]])
+    wall_lines = np.asarray(segments, float).reshape(-1, 4)[walls]  # this scan's (a
+    # remembered line may run on across a side canal's mouth)
     xy = xy_body
     if walls.any():
         xy = xy[~_on_walls(xy, segments[walls], (x0, y0, c, s), cfg)]
@@ -290,7 +292,10 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
         if lu > cfg.max_vessel_length_m or (len(lines) and _along_wall(hull, theta, lines, frame, cfg)) \
                 or (wall_cells is not None and fraction_on(
                     wall_cells, pts @ np.array([[c, s], [-s, c]]) + (x0, y0),
-                    cfg.wall_cells_m) >= cfg.wall_cells_share):
+                    cfg.wall_cells_m) >= cfg.wall_cells_share) \
+                or behind_a_wall_end(pts @ np.array([[c, s], [-s, c]]) + (x0, y0),
+                                     np.array([math.cos(theta + psi), math.sin(theta + psi)]),
+                                     (x0, y0), wall_lines):
             from_side.pop()
             continue  # a piece of wall
         faces.append(face_of.get(k, _NO_FACES))
@@ -313,6 +318,38 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
                     np.asarray(counts, int), hulls, tuple(edges), walls,
                     xy_body if occluders is None else occluders, (x0, y0, psi), tuple(faces),
                     *_viewpoints(cfg, hull_returns), wall_points)
+
+
+def behind_a_wall_end(xy: np.ndarray, axis: np.ndarray, sensor, walls: np.ndarray,
+                      touch_m: float = 1.0, min_angle_deg: float = 45.0,
+                      min_depth_m: float = 1.0) -> bool:
+    """Whether a cluster's points `xy` (N, 2), long axis `axis` (unit (2,)), are a face that
+    runs from a wall into the land behind it, as seen from `sensor`: one end within
+    `touch_m` of a wall segment (`walls` (M, 4) rows x_c, y_c, theta, length; all inertial),
+    its axis more than `min_angle_deg` across that wall, and its other end at least
+    `min_depth_m` beyond the wall's line from the sensor. Nothing floats behind a quay:
+    this is the far wall of a side canal seen through its mouth, which grows as the boat
+    comes abeam and never makes a segment long enough to be a wall on its own. A boat
+    moored alongside lies along the wall; one moored bow-on lies on the water's side."""
+    if not len(walls) or len(xy) < 2:
+        return False
+    t = xy @ axis
+    lo, hi = float(t.min()), float(t.max())
+    ends = np.stack([xy[t <= lo + touch_m].mean(axis=0), xy[t >= hi - touch_m].mean(axis=0)])
+    w = np.column_stack([np.cos(walls[:, 2]), np.sin(walls[:, 2])])  # (M, 2) directions
+    n = np.column_stack([-w[:, 1], w[:, 0]])
+    half = 0.5 * walls[:, 3]
+    across = abs(w @ axis) < math.cos(math.radians(min_angle_deg))  # (M,)
+    sensor_side = np.einsum("mk,mk->m", np.asarray(sensor, float) - walls[:, :2], n)
+    for near, far in ((0, 1), (1, 0)):
+        rel = ends[near] - walls[:, :2]
+        along, off = np.einsum("mk,mk->m", rel, w), np.einsum("mk,mk->m", rel, n)
+        touching = (np.abs(along) <= half + touch_m) & (np.abs(off) <= touch_m)
+        depth = np.einsum("mk,mk->m", ends[far] - walls[:, :2], n)
+        behind = (depth * sensor_side < 0.0) & (np.abs(depth) >= min_depth_m)
+        if (touching & across & behind).any():
+            return True
+    return False
 
 
 def _viewpoints(cfg, hull_returns) -> tuple:
