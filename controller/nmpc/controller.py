@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -23,6 +23,7 @@ from ..errors import InputError, SolverError, finite_number
 from .problem import NU, NX, NX_BOAT, NmpcConfig, ParamLayout, build_ocp, pack_params
 from .reference import Reference, WaypointPath, reference_trajectory, waypoint_path
 from .rti import QpOptions, QpStep, SqpResult, sqp
+from .blind_openings import blind_opening_ahead, blind_speed_cap
 from .passage import WayAhead
 from .seamanship import Shaping, assess
 from .segment_slots import SLOT_FIELDS, check_segments, select_checked
@@ -489,6 +490,9 @@ class NmpcController:
         if rules.stop_at_m is not None:
             stop_at = rules.stop_at_m if stop_at is None else min(stop_at, rules.stop_at_m)
         ref_speed = speed if rules.speed_mps is None else min(speed, rules.speed_mps)
+        ref_speed, blind = self._blind_speed(float(s[0]), x[:2], segs, ref_speed)
+        if blind:
+            rules = replace(rules, reason=f"{rules.reason}; {blind}" if rules.reason else blind)
         offset = self._line(rules.offset_m)
         reference = reference_trajectory(self._path, x[:2], x[2], ref_speed, c.horizon,
                                          c.step_s, self._progress_m, self.search_ahead_m,
@@ -538,7 +542,7 @@ class NmpcController:
                            vessel_separation_m=c.vessel_separation_m, bow_m=c.bow_m,
                            follow_gap_m=c.follow_gap_m, give_way_to=self._giving_way)
         self._giving_way = frozenset(e.track_id for e in rules.encounters
-                                     if e.kind == "give_way")
+                                     if e.kind in ("give_way", "stand_on_acts"))
         if rules.stop_at_m is not None:
             self._rules_stop, self._rules_clear_s = rules, 0.0
         elif self._rules_stop is not None:
@@ -549,6 +553,21 @@ class NmpcController:
                                held.reason + " (holding)", rules.encounters)
             self._rules_stop = None
         return rules
+
+    def _blind_speed(self, s: float, xy: np.ndarray, segments, speed: float):
+        """The reference speed capped for the first blind opening ahead (`blind_openings`),
+        and what to say of it ("" when nothing is capped)."""
+        c = self.config
+        if c.blind_speed_mps is None or speed <= c.blind_speed_mps:
+            return speed, ""
+        at = blind_opening_ahead(self._path, s, xy, segments, c.segment_range_m,
+                                 c.blind_depth_m)
+        if at is None:
+            return speed, ""
+        cap = blind_speed_cap(at - c.blind_margin_m - s, c.blind_speed_mps, c.stop_decel_mps2)
+        if cap >= speed:
+            return speed, ""
+        return cap, f"blind opening {at - s:.0f} m ahead: {cap:.1f} m/s"
 
     def _stop(self, s: float, d: float, x: np.ndarray, segments, elapsed_s: float,
               blind: bool):

@@ -117,6 +117,13 @@ class NmpcConfig:
     resume_after_s: float = 1.0  # the way must stay clear this long before going on
     channel_ramp_m: float = 20.0  # where the way lies off the path (a gap beside a barge),
     # the reference moves over to it along this many metres before, and back after
+    # A side canal opening behind a corner the boat cannot see past (`blind_openings`): come
+    # to it at this speed (None: no such rule, as in the paper), braking at stop_decel_mps2
+    # to be at it `blind_margin_m` before the opening (about where a vessel coming out of it
+    # is first seen past the corner); an opening is a side free this deep
+    blind_speed_mps: float | None = 1.0
+    blind_margin_m: float = 15.0
+    blind_depth_m: float = 25.0
     boat: BoatParams = field(default=IDENTIFIED)
 
     def __post_init__(self) -> None:
@@ -153,12 +160,14 @@ class NmpcConfig:
                      "vessel_separation_m", "vessel_lateral_inflation_m"):
             if getattr(self, name) < 0:
                 bad(name, "must not be negative")
-        for name in ("stop_margin_m", "resume_after_s"):
+        if self.blind_speed_mps is not None and self.blind_speed_mps <= 0:
+            bad("blind_speed_mps", "must be a positive speed, or None for no blind-opening rule")
+        for name in ("stop_margin_m", "resume_after_s", "blind_margin_m"):
             if getattr(self, name) < 0:
                 bad(name, "must not be negative")
         for name in ("step_s", "control_period_s", "nT_max", "nS_max", "dnT_max", "dnS_max",
                      "hull_radius_m", "segment_range_m", "smooth_eps",
-                     "min_passage_m", "stop_decel_mps2", "channel_ramp_m"):
+                     "min_passage_m", "stop_decel_mps2", "channel_ramp_m", "blind_depth_m"):
             if getattr(self, name) <= 0:
                 bad(name, "must be positive")
         for name in ("horizon", "rk4_substeps", "segment_slots"):

@@ -23,7 +23,11 @@ rules decide where the reference asks it to be, so that it passes the way other 
   short grows as its hull comes out from behind a corner; the boat does not then change its
   mind and speed up into it).
 - Stand on (Rule 17): a vessel crossing from port keeps out of our way: course and speed stay
-  as planned (the vessel slot still keeps the boat clear if it does not).
+  as planned (the vessel slot still keeps the boat clear if it does not), until the crossing
+  point is no farther than the boat needs to stop with its hardest braking (`act_decel_mps2`,
+  and its bow): then the give-way vessel has not acted, and the boat stops short of the
+  crossing point as when giving way (Rule 17(b)), which is no turn to port (Rule 17(c)); as
+  with giving way, the decision stands until the vessel has crossed.
 
 Everything is worked out in the route's frame (arc length s along the waypoint path, offset d
 across it, + to starboard) from the tracks' positions and velocities. Why the reference and
@@ -47,7 +51,8 @@ class Encounter:
     """How one vessel stands to the boat, and what the rules ask for."""
 
     track_id: object
-    kind: str  # meeting | overtaking | following | give_way | stand_on | astern | clear
+    kind: str  # meeting | overtaking | following | give_way | stand_on | stand_on_acts |
+    # astern | clear
     distance_m: float  # along the route, its centre from the boat (< 0: behind)
     # meeting: the channel leaves the hull room to pass it on its port side all the way to
     # it (d_v beside it, R_b to the wall: `lane_room`), so its lane counts as taken for the
@@ -70,10 +75,12 @@ def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed
            segments, *, hull_radius_m: float, separation_m: float, vessel_separation_m: float,
            bow_m: float, follow_gap_m: float = 20.0, lookahead_m: float = 70.0,
            small_craft_m: float = 6.0, bend_deg: float = 20.0,
-           give_way_to: frozenset = frozenset()) -> Shaping:
+           give_way_to: frozenset = frozenset(), act_decel_mps2: float = 0.15) -> Shaping:
     """The reference shaping for the tracked vessels (`perception.tracking.Track`-like:
     position, velocity, length_m, width_m, id); segments give the channel's walls;
-    `give_way_to`: ids the boat gave way to at the last period."""
+    `give_way_to`: ids the boat gave way to (or stood on for and then acted) at the last
+    period; `act_decel_mps2`: the boat's hardest braking, which sets how late a stand-on
+    vessel may keep its course and speed (Rule 17(b))."""
     if not tracks:
         return Shaping()
     segs = np.asarray(segments, float).reshape(-1, 4)
@@ -116,14 +123,24 @@ def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed
                 # give way (to a small craft from either side); a decision to give way
                 # stands while the conflict lasts (Rule 8: no back and forth), though the
                 # track grows out of small craft as more of its hull comes into view
-                if from_starboard or small or tr.id in give_way_to:
+                at = progress_m + crossing - (Rb + dv + bow_m + half_wid)
+                # Rule 17(b): still on a collision course when the boat could only just
+                # stop short with its hardest braking, the give-way vessel has not acted:
+                # the boat stops short of the crossing point as when giving way (never a
+                # turn to port for a vessel on its port side, Rule 17(c))
+                late = at - progress_m <= speed_mps * speed_mps / (2.0 * act_decel_mps2) + bow_m
+                if from_starboard or small:
                     kind = "give_way"
-                    at = progress_m + crossing - (Rb + dv + bow_m + half_wid)
-                    stop = at if stop is None else min(stop, at)
                     reasons.append(f"give way to {tr.id} crossing from "
                                    f"{'starboard' if from_starboard else 'port'}")
+                elif late or tr.id in give_way_to:
+                    kind = "stand_on_acts"
+                    reasons.append(f"stand-on acts: {tr.id} crossing from port has not "
+                                   f"given way")
                 else:
                     kind = "stand_on"
+                if kind != "stand_on":
+                    stop = at if stop is None else min(stop, at)
         elif abs(along) < 0.5 or abs(along) < abs(across):
             kind = "clear"  # drifting, or moving away across the route: the slot keeps clear
         elif along < 0 and ahead > 0:

@@ -30,6 +30,8 @@ class KnownWalls:
         self._lines = lines
         self._legs: dict = {}  # which lines are present -> their legs
         self._vessels = tuple(world.vessels)
+        self._world, self._air_draft_m = world, air_draft_m
+        self._last_seen: dict[int, float] = {}  # vessel index -> when last in sight
 
     def perceive(self, time_s, true_state, estimated_state):
         """The known walls and, extended to other boats, the true vessels as tracks; a vessel
@@ -48,18 +50,33 @@ class KnownWalls:
         return Percept(segs, tracks)
 
     def vessel_tracks(self, time_s, true_state) -> tuple:
-        """The vessels within range, as tracks built from the truth."""
+        """The vessels a LiDAR tracker would hand on, as tracks built from the truth: those
+        within range and in sight (a corner or the middle of the hull seen past the walls and
+        obstacles: nothing is seen through a building), and for the tracker's coasting time
+        (`TrackerConfig.max_coast_s`) after one goes out of sight."""
         if not self._vessels:
             return ()
-        from controller.perception.tracking import Track
+        from controller.perception.tracking import Track, TrackerConfig
 
+        eye = np.asarray(true_state, float)[:2]
         out = []
         for k, v in enumerate(self._vessels):
             pose = v.pose_at(time_s)
-            if np.hypot(*(pose[:2] - np.asarray(true_state)[:2])) <= self.range_m + v.hull.length_m:
-                out.append(Track.from_truth(k + 1, pose[:2], v.velocity_at(time_s), pose[2],
-                                            v.hull.length_m, v.hull.beam_m))
+            if np.hypot(*(pose[:2] - eye)) > self.range_m + v.hull.length_m:
+                continue
+            if self._in_sight(eye, np.vstack([v.outline_at(time_s), pose[:2]])):
+                self._last_seen[k] = time_s
+            elif time_s - self._last_seen.get(k, -np.inf) > TrackerConfig.max_coast_s:
+                continue
+            out.append(Track.from_truth(k + 1, pose[:2], v.velocity_at(time_s), pose[2],
+                                        v.hull.length_m, v.hull.beam_m))
         return tuple(out)
+
+    def _in_sight(self, eye, points) -> bool:
+        """Whether any of `points` is seen from `eye` along a line that crosses no wall or
+        obstacle (those a beam at the LiDAR's height meets)."""
+        edge = np.full(len(points), -1)
+        return bool(self._world.line_of_sight(eye, points, edge, self._air_draft_m).any())
 
     def segments(self, time_s, true_state, estimated_state) -> np.ndarray:
         key = tuple(r is None or time_s < r for r in self._removed)

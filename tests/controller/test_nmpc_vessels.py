@@ -131,7 +131,13 @@ def test_a_vessel_crossing_from_starboard_is_given_way_and_one_from_port_is_not(
     closest = min(stbd, key=lambda r: r["gap"])
     assert closest["gap"] > 5.0 and min(r["speed"] for r in stbd) < 1.7  # slowed down
     port = loop(lambda t: vessel_at(t, (90.0, -65.0), (0.0, 1.5), 9.0, 3.0), steps=600)
-    assert not any("give way" in r["rules"] for r in port)  # stand on (Rule 17)
+    assert not any("give way" in r["rules"] for r in port)  # stand on (Rule 17) ...
+    acts = [k for k, r in enumerate(port) if "stand-on acts" in r["rules"]]
+    stood = [k for k, r in enumerate(port) if "stand-on acts" not in r["rules"]
+             and port[k]["gap"] < 60.0]
+    # ... keeping course and speed until the crosser is close, then stopping short (17(b))
+    assert acts and stood and min(stood) < min(acts)
+    assert min(r["gap"] for r in port) > 5.0
 
 
 def test_no_vessel_slots_is_the_paper_s_problem():

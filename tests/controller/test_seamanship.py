@@ -64,6 +64,15 @@ def test_a_vessel_crossing_from_port_is_stood_on_for():
     assert shaping.stop_at_m is None
 
 
+def test_a_stand_on_vessel_acts_when_the_crosser_from_port_has_not():
+    """Rule 17(b): a vessel from port still on a collision course when the boat could only
+    just stop short of the crossing point: the boat stops short of it (no turn to port)."""
+    kind, shaping = _kind(Track(4, (14.0, -7.0), (0.0, 1.5)))
+    assert kind == "stand_on_acts"
+    assert shaping.stop_at_m is not None and shaping.offset_m == 0.0
+    assert "stand-on acts" in shaping.reason
+
+
 def test_a_slow_vessel_on_a_straight_is_overtaken_on_its_port_side():
     kind, shaping = _kind(Track(3, (30.0, 4.0), (0.8, 0.0)))
     assert kind == "overtaking"
@@ -92,7 +101,7 @@ def test_a_vessel_given_way_to_stays_so_while_it_crosses():
     grown = Track(3, (30.0, -12.0), (0.0, 1.5), length_m=9.0)
     assert assess([grown], path, 0.0, 0.0, 2.0, segs, **kw).encounters[0].kind == "stand_on"
     kept = assess([grown], path, 0.0, 0.0, 2.0, segs, give_way_to=frozenset({3}), **kw)
-    assert kept.encounters[0].kind == "give_way" and kept.stop_at_m is not None
+    assert kept.encounters[0].kind == "stand_on_acts" and kept.stop_at_m is not None
     gone = Track(3, (30.0, 20.0), (0.0, 1.5), length_m=9.0)  # crossed: nothing to give way to
     assert assess([gone], path, 0.0, 0.0, 2.0, segs, give_way_to=frozenset({3}),
                   **kw).encounters[0].kind != "give_way"

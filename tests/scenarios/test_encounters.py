@@ -23,18 +23,15 @@ def test_encounter_ends_without_a_controller_failure(path, perception, tmp_path)
     assert not summary["status"].startswith("controller failed"), summary["status"]
     assert not summary["collision"], summary["status"]
     failed = check_criteria(scenario, summary)
-    if perception == "lidar" and path.stem == "workboat_from_port":
-        # Known, open (issue 34): with the LiDAR the workboat passes 2.40 m hull to hull
-        # at seed 0, under the file's 3 m. Strict: the day it passes, this says so.
-        pytest.xfail("; ".join(failed)) if failed else pytest.fail(
-            "workboat_from_port with the LiDAR now meets its criteria: drop this xfail")
     assert not failed, "; ".join(failed)
 
 
-def test_the_workboat_from_port_fails_the_hard_qp(tmp_path):
-    """The first encounter is a real test of the exact penalty: with the paper's hard
-    obstacle rows the same run ends with a controller failure."""
-    scenario = load_scenario(Path(__file__).parent / "encounters" / "workboat_from_port.toml")
+def test_following_a_barge_meeting_a_launch_fails_the_hard_qp(tmp_path):
+    """An encounter that is a real test of the exact penalty: with the paper's hard
+    obstacle rows the same run ends with a controller failure. (The workboat from port
+    was one while known walls handed the workboat over through the buildings, 59 m off.)"""
+    scenario = load_scenario(Path(__file__).parent / "encounters"
+                             / "following_a_barge_meeting_a_launch.toml")
     hard = replace(scenario, controller_options={**scenario.controller_options,
                                                  "obstacle_rows": "hard"})
     summary = run_scenario(hard, tmp_path, plots=False).summary
