@@ -558,7 +558,7 @@ class NmpcController:
         """The reference speed capped for the first blind opening ahead (`blind_openings`),
         and what to say of it ("" when nothing is capped)."""
         c = self.config
-        if c.blind_speed_mps is None or speed <= c.blind_speed_mps:
+        if not c.blind_speed_mps or speed <= c.blind_speed_mps:  # 0 or None: no rule
             return speed, ""
         at = blind_opening_ahead(self._path, s, xy, segments, c.segment_range_m,
                                  c.blind_depth_m)

@@ -118,7 +118,7 @@ class NmpcConfig:
     channel_ramp_m: float = 20.0  # where the way lies off the path (a gap beside a barge),
     # the reference moves over to it along this many metres before, and back after
     # A side canal opening behind a corner the boat cannot see past (`blind_openings`): come
-    # to it at this speed (None: no such rule, as in the paper), braking at stop_decel_mps2
+    # to it at this speed (0 or None: no such rule, as in the paper), braking at stop_decel_mps2
     # to be at it `blind_margin_m` before the opening (about where a vessel coming out of it
     # is first seen past the corner); an opening is a side free this deep
     blind_speed_mps: float | None = 1.0
@@ -160,8 +160,8 @@ class NmpcConfig:
                      "vessel_separation_m", "vessel_lateral_inflation_m"):
             if getattr(self, name) < 0:
                 bad(name, "must not be negative")
-        if self.blind_speed_mps is not None and self.blind_speed_mps <= 0:
-            bad("blind_speed_mps", "must be a positive speed, or None for no blind-opening rule")
+        if self.blind_speed_mps is not None and self.blind_speed_mps < 0:
+            bad("blind_speed_mps", "must be a speed >= 0 (0 or None: no blind-opening rule)")
         for name in ("stop_margin_m", "resume_after_s", "blind_margin_m"):
             if getattr(self, name) < 0:
                 bad(name, "must not be negative")
