@@ -634,10 +634,12 @@ def _solve_stage(name: str, datas: Sequence[_Data], free: Sequence[str], start: 
                               f"{config.max_cpu_s:g} s of CPU for the whole identification "
                               f"({stats.get('iter_count')} iterations, not converged); raise "
                               "it with --time-limit S")
+    wopt = np.asarray(sol["x"]).ravel()
     if not stats.get("success", False) and status != "Solved_To_Acceptable_Level":
         raise SolverError(f"sysid {name} stage: IPOPT did not converge ({status}, "
-                          f"{stats.get('iter_count')} iterations)")
-    wopt = np.asarray(sol["x"]).ravel()
+                          f"{stats.get('iter_count')} iterations) on "
+                          + _blame(name, datas, wopt, n_free + n_bias, na, active, wa, f_d, p,
+                                   theta, straight))
     est = start.replace(**{n: float(scales[n] * wopt[k]) for k, n in enumerate(free)})
     x0s, trajs, offset = [], [], n_free + n_bias
     bias_values = list(BIAS_SCALE_RAD * wopt[n_free:n_free + n_bias]) if use_bias else None
@@ -659,6 +661,50 @@ def _solve_stage(name: str, datas: Sequence[_Data], free: Sequence[str], start: 
         heading_bias_deg=tuple(math.degrees(b) for b in bias_values or ()),
     )
     return _StageSolution(est, cov, info, report, x0s, trajs, bias_values)
+
+
+STAGE_HINTS = {
+    "surge": "check that the run is straight running ahead at steady throttle steps; leave "
+             "it out (--window T0:T1 around the others), or give --actuator-rates 10,40 if "
+             "the servo outputs jump",
+    "sway-yaw": "leave it out (--window T0:T1 around the others, or --heldout-window T0:T1 "
+                "to only check it), drive longer zigzags (maneuvers --overshoots 10), give "
+                "--actuator-rates 10,40 if the servo outputs jump, or try --noise-model fixed",
+}
+
+
+def _blame(name: str, datas, wopt, offset: int, na: int, active, wa, f_d, p, theta,
+           straight: bool) -> str:
+    """Which run the last iterate of a solve that did not converge fits worst, and what to
+    try: the run whose trajectory breaks the dynamics most (the largest step between the
+    model's prediction and the next state, relative to the run's spread), else the one with
+    the largest weighted misfit per sample."""
+    import casadi as ca
+
+    p_num = ca.Function("p_of_theta", [theta], [p])(wopt[:theta.size1()])
+    rows = []
+    for data in datas:
+        n = data.log.n_samples
+        X = wopt[offset:offset + na * n].reshape((na, n), order="F")
+        offset += na * n
+        pred = np.asarray(f_d.map(n - 1)(X[:, :-1], _stage_commands(data.log, straight),
+                                         ca.repmat(p_num, 1, n - 1), np.diff(data.log.time_s)))
+        spread = np.maximum(np.ptp(X, axis=1), 1e-6)[:, None]
+        defect = float(np.max(np.abs(pred - X[:, 1:]) / spread))
+        m = data.measured[:, active].T
+        err = np.where(m, X - np.nan_to_num(data.values[:, active].T), 0.0)
+        misfit = float(np.sum(wa[:, None] * err**2) / max(m.sum(), 1))
+        rows.append((defect, misfit, data.log))
+    by_defect = max(rows, key=lambda r: r[0])
+    worst = by_defect if by_defect[0] > 1e-3 else max(rows, key=lambda r: r[1])
+    log = worst[2]
+    where_ = log.meta.get("window")
+    run = log.source + (f" (--window {where_})" if where_ else "")
+    why = ("its trajectory still breaks the model's dynamics" if worst is by_defect
+           and by_defect[0] > 1e-3 else "it fits worst")
+    others = ", ".join(d.log.source for d in datas if d.log is not log)
+    return (f"the run {run}{' (with ' + others + ')' if others else ''}: {why}; try: "
+            + STAGE_HINTS.get(name, "leave that run out"))
 
 
 def _measured(sol: _StageSolution) -> list[np.ndarray]:
