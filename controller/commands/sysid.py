@@ -68,8 +68,8 @@ def register(sub) -> None:
                    help="do not estimate each turning run's heading bias (a compass's, which an "
                    "EKF's heading carries and its velocity over ground does not) with the "
                    "sway-yaw parameters")
-    p.add_argument("--time-limit", type=float, default=1800.0, metavar="S",
-                   help="CPU seconds for the whole identification (default 1800): a solve "
+    p.add_argument("--time-limit", type=float, default=300.0, metavar="S",
+                   help="CPU seconds for the whole identification (default 300): a solve "
                    "still running then stops with an error saying so; optional sway-yaw terms "
                    "not yet tried are left out, with a note")
     p.add_argument("--mass", type=float, default=1700.0, help="weight in kg (default 1700)")

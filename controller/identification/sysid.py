@@ -176,7 +176,7 @@ class SysidConfig:
     select: bool = True  # forward selection of OPTIONAL_TERMS; False fits all at once
     select_se: float = SELECT_T  # an optional term is kept when |estimate| > this many SE
     noise_model: str = "ar1"  # "ar1": residuals whitened and weighted by their noise; "fixed": W
-    max_cpu_s: float = 1800.0  # CPU time of all solves together: then a clear SolverError
+    max_cpu_s: float = 300.0  # CPU time of all solves together: then a clear SolverError
     heading_bias: bool = True  # sway-yaw: each run's heading bias estimated with the parameters
 
     def __post_init__(self) -> None:
@@ -624,17 +624,22 @@ def _solve_stage(name: str, datas: Sequence[_Data], free: Sequence[str], start: 
     t2 = time.perf_counter()
     status = str(stats.get("return_status", "?"))
     if stats.get("capped"):
+        runs = ", ".join(d.log.source + (f" (--window {d.log.meta['window']})"
+                                         if d.log.meta.get("window") else "") for d in datas)
         raise SolverTimeLimit(f"sysid {name} stage: the solve was stopped at the time limit, "
                               f"{config.max_cpu_s:g} s of CPU for the whole identification, "
-                              "inside one IPOPT iteration (a solve that takes this long has "
-                              "usually gone astray from its start); raise it with "
-                              "--time-limit S")
+                              f"inside one IPOPT iteration, on the runs {runs} (a solve that "
+                              "takes this long has usually gone astray from its start); try: "
+                              + STAGE_HINTS.get(name, "leave a run out")
+                              + "; or raise the limit with --time-limit S")
+    wopt = np.asarray(sol["x"]).ravel()
     if status == "Maximum_CpuTime_Exceeded":
         raise SolverTimeLimit(f"sysid {name} stage: IPOPT stopped at the time limit, "
                               f"{config.max_cpu_s:g} s of CPU for the whole identification "
-                              f"({stats.get('iter_count')} iterations, not converged); raise "
-                              "it with --time-limit S")
-    wopt = np.asarray(sol["x"]).ravel()
+                              f"({stats.get('iter_count')} iterations, not converged), on "
+                              + _blame(name, datas, wopt, n_free + n_bias, na, active, wa, f_d,
+                                       p, theta, straight)
+                              + "; or raise the limit with --time-limit S")
     if not stats.get("success", False) and status != "Solved_To_Acceptable_Level":
         raise SolverError(f"sysid {name} stage: IPOPT did not converge ({status}, "
                           f"{stats.get('iter_count')} iterations) on "

@@ -96,6 +96,8 @@ def test_the_readme_recipe_runs_as_written(tmp_path):
             after = resource.getrusage(resource.RUSAGE_CHILDREN)
             cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
             outputs[cmd[1]] = (done, cpu)
+            (tmp_path / f"{cmd[1]}.out").write_text(  # to read after a failure
+                f"{line}\nCPU {cpu:.1f} s, exit {done.returncode}\n{done.stdout}\n{done.stderr}")
             assert done.returncode == 0, (line, done.stdout[-3000:], done.stderr[-3000:])
     finally:
         if ap is not None and ap.poll() is None:
