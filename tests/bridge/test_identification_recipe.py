@@ -104,7 +104,7 @@ def test_the_readme_recipe_runs_as_written(tmp_path):
             ap.kill()
             ap.wait()
     session = outputs["maneuvers"][0].stderr
-    assert "first 10 m on heading" in session  # it starts at the water's edge
+    assert re.search(r"first \d+ m on heading", session)  # it starts at the water's edge
     assert "cut short" not in session and "gap of" not in session, session[-3000:]
     late = re.search(r"steps late .* the worst by ([\d.]+) s", session)
     assert late is None or float(late.group(1)) < 1.0, late  # within runs only: no gaps
@@ -119,33 +119,54 @@ def test_the_readme_recipe_runs_as_written(tmp_path):
     assert "criterion failed" not in outputs["run"][0].stdout
 
 
-def test_a_session_from_the_water_edge_then_sysid_on_its_bin(sim_rig, tmp_path, capsys):
-    """The recipe in lock-step on a virtual clock (the quick runs, levels held 15 s): the boat
-    starts at the canal's end, goes to open water first, no run is cut short and no step
-    between runs counts as late; sysid finds the runs in the .BIN itself and identifies."""
-    from bridge.main import main
+@pytest.fixture(scope="module")
+def edge_session(tmp_path_factory):
+    """The recipe's session in lock-step on a virtual clock (the quick runs, levels held
+    15 s, a compass 2 deg off), from the canal's end: (result, console, the .BIN)."""
+    from tests.bridge.rigs import SimRig
 
+    tmp = tmp_path_factory.mktemp("edge")
     lake = load_scenario(LAKE)
-    rig = sim_rig(lake, seed=3, tick_s=0.02, ekf_delay_s=5.0, init_s=2.0,
-                  log_dir=tmp_path / "ap", physics_step_s=0.02,
-                  ekf_noise=NoiseSpec(heading_bias_rad=math.radians(2.0)),
-                  link_kwargs={"geodetic_origin": lake.geodetic_origin})
-    session = ManeuverSession(rig.link, lake, QUICK_RUNS,
-                              BridgeOptions(mode="MANUAL", arm=True, ekf_timeout_s=30.0),
-                              tmp_path / "boat", console=rig.console, hold_s=15.0)
-    result = session.run()
-    console = rig.console.getvalue()
+    rig = SimRig(lake, tmp / "work", seed=3, tick_s=0.02, ekf_delay_s=5.0, init_s=2.0,
+                 log_dir=tmp / "ap", physics_step_s=0.02,
+                 ekf_noise=NoiseSpec(heading_bias_rad=math.radians(2.0)),
+                 link_kwargs={"geodetic_origin": lake.geodetic_origin})
+    try:
+        session = ManeuverSession(rig.link, lake, QUICK_RUNS,
+                                  BridgeOptions(mode="MANUAL", arm=True, ekf_timeout_s=30.0),
+                                  tmp / "boat", console=rig.console, hold_s=15.0)
+        result = session.run()
+        xy = np.array(rig.autopilot.true_state[:2])
+    finally:
+        rig.close()  # the .BIN complete
+    (bin_path,) = rig.autopilot.log_paths
+    return result, rig.console.getvalue(), bin_path, xy
+
+
+def test_a_session_from_the_water_edge_goes_to_open_water_first(edge_session):
+    """The boat starts at the canal's end: it goes to open water first, no run is cut short,
+    no step between runs counts as late, and the runs are found in the autopilot's .BIN."""
+    from controller.identification.dataflash import read_dataflash
+    from controller.identification.log_runs import find_runs
+
+    result, console, bin_path, xy = edge_session
     assert result.exit_code == EXIT_GOAL, console[-2000:]
-    assert "is not in open water" in console and "first 10 m on heading" in console
+    assert "is not in open water" in console and re.search(r"first \d+ m on heading", console), console
     assert not any(r.cut_short for r in result.runs), [r.cut_short for r in result.runs]
     assert result.late_steps == 0 and "steps late" not in console
     assert all(p is not None for p in result.paths)
-    rig.close()
-    (bin_path,) = rig.autopilot.log_paths
+    assert 0.0 < xy[0] < 2000.0 and abs(xy[1]) < 300.0  # stayed on the lake
+    kinds = [r.meta["maneuver"] for r in find_runs(read_dataflash(bin_path))]
+    assert kinds.count("zigzag") == 2 and "acceleration" in kinds, kinds
+
+
+@pytest.mark.slow  # about 70 s of identification
+def test_sysid_finds_the_runs_in_the_sessions_bin_and_identifies(edge_session, capsys):
+    from bridge.main import main
+
+    bin_path = edge_session[2]
     capsys.readouterr()
-    assert main(["sysid", str(bin_path), "--time-limit", "300"]) == 0
+    assert main(["sysid", str(bin_path)]) == 0
     out = capsys.readouterr().out
     assert out.count("zigzag found") == 2 and "acceleration found" in out
     assert "sway-yaw stage" in out and "heading bias of each run" in out
-    xy = np.array(rig.autopilot.true_state[:2])
-    assert 0.0 < xy[0] < 2000.0 and abs(xy[1]) < 300.0  # stayed on the lake
