@@ -61,6 +61,7 @@ WAIT_LIMIT_S = 180.0
 STOP_FACTOR = 1.5  # on the model's coasting distance
 ENTRY_DEPTH_M = 10.0  # how far into open water the boat goes when it starts at its edge
 MIN_HOLD_S = 20.0  # a level is held at least this long when the water is short
+SHORT_WATER_SHARE = 0.9  # ... and the run planned to use at most this share of it
 MAX_STEP_PERIODS = 5.0  # a late step moves the commands at most this many periods' worth
 
 
@@ -121,6 +122,7 @@ class ManeuverSession:
         self._start_xy = None
         self.water: OpenWater | None = None  # where the boat may go (from the start on)
         self._lengths: dict[str, float] = {}  # each run's way on the water, from the model
+        self._shortest: dict[str, float] = {}  # ... with each level held MIN_HOLD_S
         self._run_hold_s = self.hold_s  # the hold of the run under way (shorter in short water)
         self._next_t = None
         self._last_tick = None
@@ -187,6 +189,9 @@ class ManeuverSession:
         params = self.scenario.controller_params
         self._lengths = {run.name: run_length_m(run, params, self.hold_s, STOP_FACTOR)
                          for run in self.runs}
+        if self.hold_s > MIN_HOLD_S:
+            self._shortest = {run.name: run_length_m(run, params, MIN_HOLD_S, STOP_FACTOR)
+                              for run in self.runs}
         self._say("maneuvers: the runs need about " + ", ".join(
             f"{name} {length:.0f} m" for name, length in self._lengths.items())
             + f" of straight water (each level held {self.hold_s:g} s)")
@@ -298,13 +303,16 @@ class ManeuverSession:
         self._say(f"maneuvers: heading {math.degrees(ray.heading) % 360:.0f} deg, "
                   f"{ray.free_m:.0f} m of water ahead (the run needs about {need:.0f} m)")
         self._run_hold_s = self.hold_s
-        if need > ray.free_m > 0 and self.hold_s > MIN_HOLD_S:
-            self._run_hold_s = max(MIN_HOLD_S, self.hold_s * ray.free_m / need)
+        shortest = self._shortest.get(run.name)
+        if need > ray.free_m > 0 and shortest is not None:
+            # the run's way grows about linearly with the hold: between the two worked out
+            share = (SHORT_WATER_SHARE * ray.free_m - shortest) / max(need - shortest, 1e-6)
+            self._run_hold_s = MIN_HOLD_S + max(0.0, share) * (self.hold_s - MIN_HOLD_S)
             self._say(f"maneuvers: {run.name}: each level held {self._run_hold_s:.0f} s instead "
                       f"of {self.hold_s:g} s to stay in the water"
-                      + ("" if self._run_hold_s * need / self.hold_s <= ray.free_m else
-                         " (still too long: it will be cut short; give it more water, or a "
-                         "shorter --hold)"))
+                      + ("" if shortest <= SHORT_WATER_SHARE * ray.free_m else
+                         f" (still too long, about {shortest:.0f} m: it will be cut short; "
+                         "give it more water, or a shorter --hold)"))
         for throttle in REPOSITION_THROTTLE_PCT:
             try:
                 self._turn_to(ray.heading, throttle)
