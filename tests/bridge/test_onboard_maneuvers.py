@@ -183,7 +183,7 @@ def test_coasting_distance_from_the_surge_equation():
 
 
 def test_in_short_water_each_level_is_held_shorter_and_said(boat, lake, tmp_path):
-    """Two levels of 60 s need about 200 m; within a 150 m radius the session holds each
+    """Two levels of 60 s need about 250 m; within a 150 m radius the session holds each
     shorter (not less than 20 s) so that the run ends in the water, not cut short."""
     b = boat()
     runs = (SurgeRun("01_acceleration", "acceleration", (31.0, 50.6), lead_in_s=2.0),)
