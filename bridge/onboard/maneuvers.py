@@ -8,8 +8,12 @@ speed noise makes a steady-state test unreliable on the boat; 60 s is about four
 constants of the paper's boat at its slowest level). Commands move no faster than the
 actuators (the scenario's rates, over the clock time measured between control steps), so the
 servo outputs that the autopilot logs are where the actuators are; control steps that come
-late (the loop behind the clock) are counted and reported. Before each run the boat turns at low throttle to the heading with the most
-water ahead (and stops, for a run from rest).
+late within a run (the loop behind the clock) are counted and reported (between runs a late
+step harms nothing). The runs are planned inside the water (`open_water`): how far each goes
+is worked out from the model first; before each run the boat goes to open water if it is at
+its edge (a start at the end of a canal), turns at low throttle to the heading with the most
+water ahead (and stops, for a run from rest), and holds each level shorter if even that water
+is too short for the run.
 
 Safe as the bridge: a lost link, a stale state, an unusable EKF position, a parameter change
 that makes the autopilot ignore it, or Ctrl-C ends the session with neutral commands, the
@@ -39,6 +43,7 @@ from controller.errors import CanalnavError, InputError
 from controller.geometry import wrap_angle
 
 from bridge.onboard.lateness import Lateness
+from bridge.onboard.open_water import RAY_MAX_M, OpenWater, coast_distance_m, run_length_m
 from bridge.onboard.loop import (EXIT_GOAL, EXIT_INTERRUPTED, EXIT_STOPPED, MAV_SEVERITY_CRITICAL,
                             MAV_SEVERITY_INFO, MAV_SEVERITY_WARNING, BridgeOptions, link_fault,
                             prepare_link, safe_stop)
@@ -53,10 +58,10 @@ BRAKE_PCT = 30.0  # reverse thrust to slow down, at most
 BRAKE_GAIN_PCT_PER_MPS = 300.0  # ... fading with the speed ahead
 SLOW_MPS = 0.3
 WAIT_LIMIT_S = 180.0
-HULL_MARGIN_M = 5.0  # a hull circle (R_b = 3 m) 2 m ahead of the reference point
 STOP_FACTOR = 1.5  # on the model's coasting distance
-RAY_STEP_M = 5.0
-RAY_MAX_M = 2000.0
+ENTRY_DEPTH_M = 10.0  # how far into open water the boat goes when it starts at its edge
+MIN_HOLD_S = 20.0  # a level is held at least this long when the water is short
+SHORT_WATER_SHARE = 0.9  # ... and the run planned to use at most this share of it
 MAX_STEP_PERIODS = 5.0  # a late step moves the commands at most this many periods' worth
 
 
@@ -92,16 +97,6 @@ class SessionResult:
     worst_late_s: float = 0.0
 
 
-def coast_distance_m(params, speed_mps: float, to_mps: float = 0.2) -> float:
-    """How far the boat coasts (no thrust, straight) from `speed_mps` to `to_mps`, from the
-    surge equation m11 u' = Xu u + Xuu u|u| (closed form)."""
-    u0, u1 = abs(float(speed_mps)), float(to_mps)
-    if u0 <= u1:
-        return 0.0
-    a, b = max(-params.Xu, 1e-6), max(-params.Xuu, 1e-6)
-    return params.m11 / b * math.log((a + b * u0) / (a + b * u1))
-
-
 class ManeuverSession:
     """The runs on one prepared link (see the module docstring)."""
 
@@ -125,8 +120,13 @@ class ManeuverSession:
         self._last_logged = None
         self._servos = None
         self._start_xy = None
+        self.water: OpenWater | None = None  # where the boat may go (from the start on)
+        self._lengths: dict[str, float] = {}  # each run's way on the water, from the model
+        self._shortest: dict[str, float] = {}  # ... with each level held MIN_HOLD_S
+        self._run_hold_s = self.hold_s  # the hold of the run under way (shorter in short water)
         self._next_t = None
-        self.lateness = Lateness(self.period)  # steps late, gaps (the loop behind the clock)
+        self._last_tick = None
+        self.lateness = Lateness(self.period)  # within runs: steps late, gaps
         self._session_fh = None
         self._session = None
         self.failsafes: list[str] = []
@@ -136,6 +136,7 @@ class ManeuverSession:
         from bridge.onboard.loop import PreflightRefused
 
         self.out_dir.mkdir(parents=True, exist_ok=True)
+        self._plan()
         try:
             prepare_link(self.link, self.scenario, self.options, self.console)
         except PreflightRefused as exc:
@@ -145,6 +146,7 @@ class ManeuverSession:
         self.link.request_streams(self.options.stream_rate_hz, messages=("SERVO_OUTPUT_RAW",))
         st = self.link.state
         self._start_xy = np.array([st.x, st.y])
+        self.water = OpenWater(self.scenario.world, self._start_xy, self.radius_m)
         self._open_session_log()
         result = SessionResult(EXIT_GOAL, "manoeuvres done")
         try:
@@ -179,6 +181,20 @@ class ManeuverSession:
         if late.summary():
             self._say(f"maneuvers: {late.summary()}")
         return result
+
+    def _plan(self) -> None:
+        """How far each run takes the boat (the scenario's model, each level held `hold_s`),
+        said before the session starts, so that each run can be placed where the water is
+        long enough (`_reposition`)."""
+        params = self.scenario.controller_params
+        self._lengths = {run.name: run_length_m(run, params, self.hold_s, STOP_FACTOR)
+                         for run in self.runs}
+        if self.hold_s > MIN_HOLD_S:
+            self._shortest = {run.name: run_length_m(run, params, MIN_HOLD_S, STOP_FACTOR)
+                              for run in self.runs}
+        self._say("maneuvers: the runs need about " + ", ".join(
+            f"{name} {length:.0f} m" for name, length in self._lengths.items())
+            + f" of straight water (each level held {self.hold_s:g} s)")
 
     def _read_servo_params(self):
         """SERVOn_FUNCTION for every output, then the calibration of the two that steer and
@@ -243,14 +259,15 @@ class ManeuverSession:
             self._tick(target)
 
     def _surge(self, run, record: RunRecord) -> None:
+        hold = self._run_hold_s
         if run.start_pct:
-            self._hold((run.start_pct, 0.0), self.hold_s, None)  # to steady state, not logged
+            self._hold((run.start_pct, 0.0), hold, None)  # to steady state, not logged
         self._hold((run.start_pct, 0.0), run.lead_in_s, record)
         for level in run.throttle_pct:
-            self._hold((level, 0.0), self.hold_s, record)
+            self._hold((level, 0.0), hold, record)
 
     def _zigzag(self, run, record: RunRecord) -> None:
-        self._hold((run.throttle_pct, 0.0), self.hold_s, None)  # steady straight running
+        self._hold((run.throttle_pct, 0.0), self._run_hold_s, None)  # steady straight running
         self._hold((run.throttle_pct, 0.0), run.lead_in_s, record)
         psi0 = self.link.state.psi
         limit = math.radians(run.heading_deg)
@@ -271,16 +288,34 @@ class ManeuverSession:
 
     # -- getting ready ----------------------------------------------------------------------
     def _reposition(self, run) -> None:
-        """Turn (low throttle) to the heading with the most water ahead; stop first for a run
-        from rest. Not logged as a run."""
+        """Get ready for `run`, not logged: out to open water first if the boat is at its
+        edge; then turn (low throttle) to the heading with the most water ahead; hold each
+        level shorter if even that is too short for the run; stop for a run from rest."""
         self._recording = None
         st = self.link.state
-        heading, free = self._best_heading(np.array([st.x, st.y]), st.psi)
-        self._say(f"maneuvers: heading {math.degrees(heading) % 360:.0f} deg, {free:.0f} m of "
-                  "water ahead")
+        here = np.array([st.x, st.y])
+        if not self.water.ok(here)[0]:
+            self._to_open_water(here, st.psi)
+            st = self.link.state
+            here = np.array([st.x, st.y])
+        ray = self.water.best_heading(here, st.psi)
+        need = self._lengths.get(run.name, 0.0)
+        self._say(f"maneuvers: heading {math.degrees(ray.heading) % 360:.0f} deg, "
+                  f"{ray.free_m:.0f} m of water ahead (the run needs about {need:.0f} m)")
+        self._run_hold_s = self.hold_s
+        shortest = self._shortest.get(run.name)
+        if need > ray.free_m > 0 and shortest is not None:
+            # the run's way grows about linearly with the hold: between the two worked out
+            share = (SHORT_WATER_SHARE * ray.free_m - shortest) / max(need - shortest, 1e-6)
+            self._run_hold_s = MIN_HOLD_S + max(0.0, share) * (self.hold_s - MIN_HOLD_S)
+            self._say(f"maneuvers: {run.name}: each level held {self._run_hold_s:.0f} s instead "
+                      f"of {self.hold_s:g} s to stay in the water"
+                      + ("" if shortest <= SHORT_WATER_SHARE * ray.free_m else
+                         f" (still too long, about {shortest:.0f} m: it will be cut short; "
+                         "give it more water, or a shorter --hold)"))
         for throttle in REPOSITION_THROTTLE_PCT:
             try:
-                self._turn_to(heading, throttle)
+                self._turn_to(ray.heading, throttle)
                 break
             except _CutShort as exc:
                 self._say(f"maneuvers: turning at {throttle:g} %: {exc}; slowing down")
@@ -291,6 +326,33 @@ class ManeuverSession:
 
         if isinstance(run, SurgeRun) and not run.start_pct:
             self._wait_speed(AT_REST_MPS)
+
+    def _to_open_water(self, here: np.ndarray, psi: float) -> None:
+        """The boat is where the runs may not go (at the water's edge, near a wall, outside
+        the radius): turn to the nearest open water and go there at low throttle, unfenced,
+        until the boat is `ENTRY_DEPTH_M` into it (braking then backs it out no further than
+        the edge) and its coasting keeps it there."""
+        why = self.water.why_not(here)
+        ray = self.water.best_heading(here, psi)
+        if not math.isfinite(ray.entry_m) or ray.free_m <= 0:
+            raise _Ended(f"the boat is not in open water ({why}) and none is in reach "
+                         f"within {RAY_MAX_M:g} m")
+        self._say(f"maneuvers: the boat is not in open water ({why}): first "
+                  f"{ray.entry_m:.0f} m on heading {math.degrees(ray.heading) % 360:.0f} deg to it")
+        self._event(f"to open water: {why}")
+        throttle = REPOSITION_THROTTLE_PCT[-1]
+        start = self.clock.now()
+        while self.clock.now() - start < WAIT_LIMIT_S:
+            st = self.link.state
+            back = np.array([st.x, st.y]) - ENTRY_DEPTH_M * np.array([math.cos(st.psi),
+                                                                     math.sin(st.psi)])
+            if self._fence(st) is None and self.water.ok(np.vstack([[st.x, st.y], back])).all():
+                return
+            err = float(wrap_angle(ray.heading - st.psi))
+            nS = float(np.clip(-HEADING_GAIN_PCT_PER_DEG * math.degrees(err),
+                               -MAX_REPOSITION_STEER_PCT, MAX_REPOSITION_STEER_PCT))
+            self._tick((throttle, nS))
+        raise _Ended(f"could not reach open water in {WAIT_LIMIT_S:g} s ({why})")
 
     def _turn_to(self, heading: float, throttle: float) -> None:
         """A proportional heading controller at `throttle`, fenced, until on `heading`."""
@@ -323,31 +385,6 @@ class ManeuverSession:
     def _slow_down(self) -> None:
         self._wait_speed(SLOW_MPS)
 
-    def _ok(self, points: np.ndarray) -> np.ndarray:
-        """Which points the boat may reach: on the water, clear of walls and obstacles, in
-        the radius."""
-        world = self.scenario.world
-        ok = np.array([r is None for r in world.off_water(points)], bool)
-        ok &= world.clearance(points) >= HULL_MARGIN_M
-        if self.radius_m is not None:
-            ok &= np.hypot(*(points - self._start_xy).T) <= self.radius_m
-        return ok
-
-    def _best_heading(self, xy: np.ndarray, psi: float) -> tuple[float, float]:
-        """The heading (10 deg steps) with the longest stretch of water ahead, the nearer to
-        the current one on a tie; and that length."""
-        best = (psi, -1.0, math.inf)
-        steps = np.arange(RAY_STEP_M, RAY_MAX_M + 1e-9, RAY_STEP_M)
-        for turn in np.radians(np.arange(0, 360, 10)):
-            h = psi + turn
-            pts = xy + steps[:, None] * np.array([math.cos(h), math.sin(h)])
-            ok = self._ok(pts)
-            free = steps[np.argmin(ok)] - RAY_STEP_M if not ok.all() else steps[-1]
-            cost = abs(float(wrap_angle(turn)))
-            if free > best[1] + RAY_STEP_M or (abs(free - best[1]) <= RAY_STEP_M and cost < best[2]):
-                best = (float(wrap_angle(h)), float(free), cost)
-        return best[0], best[1]
-
     def _fence(self, st) -> str | None:
         """Why the boat must not go on (it would leave the water or the radius), or None."""
         speed = st.speed_mps
@@ -355,7 +392,7 @@ class ManeuverSession:
         course = st.psi + math.atan2(st.v, st.u) if speed > 0.1 else st.psi
         d = np.linspace(0.0, max(reach, 0.0), max(2, int(reach / 2.0) + 2))
         pts = np.array([st.x, st.y]) + d[:, None] * np.array([math.cos(course), math.sin(course)])
-        ok = self._ok(pts)
+        ok = self.water.ok(pts)
         if ok.all():
             return None
         p = pts[int(np.argmin(ok))]
@@ -376,7 +413,13 @@ class ManeuverSession:
         jumps than the actuators follow in one step."""
         target = np.clip(np.asarray(target, float), -100.0, 100.0)
         now = self.clock.now()
-        elapsed, warning = self.lateness.tick(now)
+        elapsed = self.period if self._last_tick is None else now - self._last_tick
+        self._last_tick = now
+        warning = None
+        if self._recording is not None:  # lateness within a run: between runs it does no harm
+            warning = self.lateness.tick(now)[1]
+        else:
+            self.lateness.pause()
         if warning:
             self._event(warning)
             self._say(f"maneuvers: warning: {warning}: the servo outputs move in larger "

@@ -64,8 +64,12 @@ def register(sub) -> None:
     p.add_argument("--noise-model", choices=("ar1", "fixed"), default="ar1",
                    help="ar1 (default): a second pass weighting each channel by its residual "
                    "noise, AR(1)-whitened; fixed: the paper's W only")
-    p.add_argument("--time-limit", type=float, default=1800.0, metavar="S",
-                   help="CPU seconds for the whole identification (default 1800): a solve "
+    p.add_argument("--no-heading-bias", dest="heading_bias", action="store_false",
+                   help="do not estimate each turning run's heading bias (a compass's, which an "
+                   "EKF's heading carries and its velocity over ground does not) with the "
+                   "sway-yaw parameters")
+    p.add_argument("--time-limit", type=float, default=300.0, metavar="S",
+                   help="CPU seconds for the whole identification (default 300): a solve "
                    "still running then stops with an error saying so; optional sway-yaw terms "
                    "not yet tried are left out, with a note")
     p.add_argument("--mass", type=float, default=1700.0, help="weight in kg (default 1700)")
@@ -99,7 +103,8 @@ def _config(args):
     dims = BoatDimensions(mass_kg=args.mass, length_m=args.length, breadth_m=args.breadth)
     extra = {} if args.select_se is None else {"select_se": args.select_se}
     return SysidConfig(dimensions=dims, fixed=dict(args.fix), select=not args.all_terms,
-                       noise_model=args.noise_model, max_cpu_s=args.time_limit, **extra)
+                       noise_model=args.noise_model, max_cpu_s=args.time_limit,
+                       heading_bias=args.heading_bias, **extra)
 
 
 def run(args) -> int:

@@ -176,7 +176,8 @@ class SysidConfig:
     select: bool = True  # forward selection of OPTIONAL_TERMS; False fits all at once
     select_se: float = SELECT_T  # an optional term is kept when |estimate| > this many SE
     noise_model: str = "ar1"  # "ar1": residuals whitened and weighted by their noise; "fixed": W
-    max_cpu_s: float = 1800.0  # CPU time of all solves together: then a clear SolverError
+    max_cpu_s: float = 300.0  # CPU time of all solves together: then a clear SolverError
+    heading_bias: bool = True  # sway-yaw: each run's heading bias estimated with the parameters
 
     def __post_init__(self) -> None:
         for name, value in self.fixed.items():
@@ -233,6 +234,8 @@ class StageReport:
     noise: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     """Per fitted channel (display name): the residual noise's standard deviation (SI) and
     correlation time (s) of the AR(1) model the fit weighted by; empty with fixed weights."""
+    heading_bias_deg: tuple[float, ...] = ()
+    """Each run's heading bias estimated with the parameters (degrees), if it was."""
 
 
 @dataclass(frozen=True)
@@ -349,6 +352,26 @@ class _StageSolution:
     report: StageReport
     x0: list[np.ndarray]
     trajectories: list[np.ndarray]
+    biases: list[float] | None = None  # each run's heading bias (rad), when estimated
+
+
+BIAS_SCALE_RAD = 0.01  # the NLP's heading-bias variables are in these units
+MAX_BIAS_RAD = math.radians(20.0)
+
+
+def _as_measured(X, bias):
+    """The states `X` (6, N) as a heading off by `bias` reports them: the heading plus the
+    bias, and the velocity over ground resolved along that heading (u, v turned by -bias).
+
+    A compass's bias misleads an EKF's heading, not its velocity over ground (GPS), so the
+    body-frame velocity a log holds is the true one turned by the bias: on a straight run at
+    2 m/s, 2 deg of bias reads as a sway of -0.07 m/s, which the boat's dynamics cannot make
+    and which a fit without the bias explains with its sway-yaw parameters."""
+    import casadi as ca
+
+    c, s = ca.cos(bias), ca.sin(bias)
+    return ca.vertcat(X[0, :], X[1, :], X[2, :] + bias, c * X[3, :] + s * X[4, :],
+                      -s * X[3, :] + c * X[4, :], X[5, :])
 
 
 def _stage_step(step, active: Sequence[int]):
@@ -517,10 +540,12 @@ def _solve_stage(name: str, datas: Sequence[_Data], free: Sequence[str], start: 
                  scales: Mapping[str, float], weights: Sequence[float],
                  config: SysidConfig, step, trajectories=None,
                  straight: bool = False, noise: Mapping[int, _Noise] | None = None,
-                 deadline: float | None = None) -> _StageSolution:
+                 deadline: float | None = None, biases=None) -> _StageSolution:
     """One NLP (eq. SI) over the stage's runs by multiple shooting; then its covariance.
     With `noise` the cost is each channel's AR(1)-whitened residuals over its noise instead
-    of the weights W (the channels W leaves out stay out)."""
+    of the weights W (the channels W leaves out stay out). With `config.heading_bias` (not
+    the surge stage) each run's heading bias is a variable too (`_as_measured`), started
+    from `biases`."""
     import casadi as ca
 
     t0 = time.perf_counter()
@@ -537,28 +562,36 @@ def _solve_stage(name: str, datas: Sequence[_Data], free: Sequence[str], start: 
     theta = ca.MX.sym("theta", n_free)
     p = ca.vertcat(*[scales[n] * theta[free.index(n)] if n in free else getattr(start, n)
                      for n in PARAM_NAMES])
-    w, g, cost = [theta], [], 0
-    w0 = [np.array([getattr(start, n) / scales[n] for n in free])]
-    lbw = [np.array([_theta_bounds(n)[0] for n in free])]
-    ubw = [np.array([_theta_bounds(n)[1] for n in free])]
+    use_bias = config.heading_bias and not straight
+    n_bias = len(datas) if use_bias else 0
+    beta = ca.MX.sym("beta", n_bias)
+    w, g, cost = [theta, beta], [], 0
+    w0 = [np.array([getattr(start, n) / scales[n] for n in free]),
+          np.asarray(biases if biases is not None else np.zeros(n_bias), float)[:n_bias]
+          / BIAS_SCALE_RAD]
+    lbw = [np.array([_theta_bounds(n)[0] for n in free]),
+           np.full(n_bias, -MAX_BIAS_RAD / BIAS_SCALE_RAD)]
+    ubw = [np.array([_theta_bounds(n)[1] for n in free]),
+           np.full(n_bias, MAX_BIAS_RAD / BIAS_SCALE_RAD)]
     for i, data in enumerate(datas):
         n = data.log.n_samples
         X = ca.MX.sym(f"X_{i}", na, n)
         X_next = f_d.map(n - 1)(X[:, :-1], _stage_commands(data.log, straight),
                                 ca.repmat(p, 1, n - 1), np.diff(data.log.time_s))
         g.append(ca.vec(X_next - X[:, 1:]))
+        Y = _as_measured(X, BIAS_SCALE_RAD * beta[i]) if use_bias else X
         if noise is None:
             measured = data.measured[:, active]
             root_w = (np.sqrt(wa)[None, :] * measured).T  # (na, N): zero where not measured
             target = np.where(measured, data.values[:, active], 0.0).T
-            cost = cost + ca.sumsqr(root_w * (X - target))
+            cost = cost + ca.sumsqr(root_w * (Y - target))
         else:
             for k, c in enumerate(active):
                 rows = np.flatnonzero(data.measured[:, c])
                 if c not in noise or not rows.size:
                     continue
                 nz = noise[c]
-                e = ca.vec(X[k, rows.tolist()]) - data.values[rows, c]
+                e = ca.vec(Y[k, rows.tolist()]) - data.values[rows, c]
                 adjacent, starts = _whitening_index(rows)
                 terms = 0
                 if adjacent.size:
@@ -591,29 +624,37 @@ def _solve_stage(name: str, datas: Sequence[_Data], free: Sequence[str], start: 
     t2 = time.perf_counter()
     status = str(stats.get("return_status", "?"))
     if stats.get("capped"):
+        runs = ", ".join(d.log.source + (f" (--window {d.log.meta['window']})"
+                                         if d.log.meta.get("window") else "") for d in datas)
         raise SolverTimeLimit(f"sysid {name} stage: the solve was stopped at the time limit, "
                               f"{config.max_cpu_s:g} s of CPU for the whole identification, "
-                              "inside one IPOPT iteration (a solve that takes this long has "
-                              "usually gone astray from its start); raise it with "
-                              "--time-limit S")
+                              f"inside one IPOPT iteration, on the runs {runs} (a solve that "
+                              "takes this long has usually gone astray from its start); try: "
+                              + STAGE_HINTS.get(name, "leave a run out")
+                              + "; or raise the limit with --time-limit S")
+    wopt = np.asarray(sol["x"]).ravel()
     if status == "Maximum_CpuTime_Exceeded":
         raise SolverTimeLimit(f"sysid {name} stage: IPOPT stopped at the time limit, "
                               f"{config.max_cpu_s:g} s of CPU for the whole identification "
-                              f"({stats.get('iter_count')} iterations, not converged); raise "
-                              "it with --time-limit S")
+                              f"({stats.get('iter_count')} iterations, not converged), on "
+                              + _blame(name, datas, wopt, n_free + n_bias, na, active, wa, f_d,
+                                       p, theta, straight)
+                              + "; or raise the limit with --time-limit S")
     if not stats.get("success", False) and status != "Solved_To_Acceptable_Level":
         raise SolverError(f"sysid {name} stage: IPOPT did not converge ({status}, "
-                          f"{stats.get('iter_count')} iterations)")
-    wopt = np.asarray(sol["x"]).ravel()
+                          f"{stats.get('iter_count')} iterations) on "
+                          + _blame(name, datas, wopt, n_free + n_bias, na, active, wa, f_d, p,
+                                   theta, straight))
     est = start.replace(**{n: float(scales[n] * wopt[k]) for k, n in enumerate(free)})
-    x0s, trajs, offset = [], [], n_free
+    x0s, trajs, offset = [], [], n_free + n_bias
+    bias_values = list(BIAS_SCALE_RAD * wopt[n_free:n_free + n_bias]) if use_bias else None
     for data in datas:
         n = data.log.n_samples
         trajs.append(wopt[offset:offset + na * n].reshape((na, n), order="F"))
         x0s.append(trajs[-1][:, 0].copy())
         offset += na * n
     cov, info, rms = _covariance(datas, free, est, scales, wa, x0s, f_d, active, straight,
-                                 noise)
+                                 noise, bias_values)
     t3 = time.perf_counter()
     report = StageReport(
         name=name, logs=tuple(d.log.source for d in datas), free=tuple(free),
@@ -622,8 +663,62 @@ def _solve_stage(name: str, datas: Sequence[_Data], free: Sequence[str], start: 
         cost=float(sol["f"].reshape(-1)[0]), rms=rms, build_s=t1 - t0, solve_s=t2 - t1,
         covariance_s=t3 - t2,
         noise=_noise_report(noise, datas),
+        heading_bias_deg=tuple(math.degrees(b) for b in bias_values or ()),
     )
-    return _StageSolution(est, cov, info, report, x0s, trajs)
+    return _StageSolution(est, cov, info, report, x0s, trajs, bias_values)
+
+
+STAGE_HINTS = {
+    "surge": "check that the run is straight running ahead at steady throttle steps; leave "
+             "it out (--window T0:T1 around the others), or give --actuator-rates 10,40 if "
+             "the servo outputs jump",
+    "sway-yaw": "leave it out (--window T0:T1 around the others, or --heldout-window T0:T1 "
+                "to only check it), drive longer zigzags (maneuvers --overshoots 10), give "
+                "--actuator-rates 10,40 if the servo outputs jump, or try --noise-model fixed",
+}
+
+
+def _blame(name: str, datas, wopt, offset: int, na: int, active, wa, f_d, p, theta,
+           straight: bool) -> str:
+    """Which run the last iterate of a solve that did not converge fits worst, and what to
+    try: the run whose trajectory breaks the dynamics most (the largest step between the
+    model's prediction and the next state, relative to the run's spread), else the one with
+    the largest weighted misfit per sample."""
+    import casadi as ca
+
+    p_num = ca.Function("p_of_theta", [theta], [p])(wopt[:theta.size1()])
+    rows = []
+    for data in datas:
+        n = data.log.n_samples
+        X = wopt[offset:offset + na * n].reshape((na, n), order="F")
+        offset += na * n
+        pred = np.asarray(f_d.map(n - 1)(X[:, :-1], _stage_commands(data.log, straight),
+                                         ca.repmat(p_num, 1, n - 1), np.diff(data.log.time_s)))
+        spread = np.maximum(np.ptp(X, axis=1), 1e-6)[:, None]
+        defect = float(np.max(np.abs(pred - X[:, 1:]) / spread))
+        m = data.measured[:, active].T
+        err = np.where(m, X - np.nan_to_num(data.values[:, active].T), 0.0)
+        misfit = float(np.sum(wa[:, None] * err**2) / max(m.sum(), 1))
+        rows.append((defect, misfit, data.log))
+    by_defect = max(rows, key=lambda r: r[0])
+    worst = by_defect if by_defect[0] > 1e-3 else max(rows, key=lambda r: r[1])
+    log = worst[2]
+    where_ = log.meta.get("window")
+    run = log.source + (f" (--window {where_})" if where_ else "")
+    why = ("its trajectory still breaks the model's dynamics" if worst is by_defect
+           and by_defect[0] > 1e-3 else "it fits worst")
+    others = ", ".join(d.log.source for d in datas if d.log is not log)
+    return (f"the run {run}{' (with ' + others + ')' if others else ''}: {why}; try: "
+            + STAGE_HINTS.get(name, "leave that run out"))
+
+
+def _measured(sol: _StageSolution) -> list[np.ndarray]:
+    """The solution's trajectories as the logs measure them (its heading biases applied)."""
+    if sol.biases is None:
+        return sol.trajectories
+    import casadi as ca
+
+    return [np.asarray(_as_measured(ca.DM(X), b)) for X, b in zip(sol.trajectories, sol.biases)]
 
 
 def _noise_report(noise, datas) -> dict[str, tuple[float, float]]:
@@ -643,6 +738,7 @@ def _merge_passes(passes: Sequence[StageReport], last: StageReport) -> StageRepo
         rms=last.rms, build_s=sum(p.build_s for p in passes),
         solve_s=sum(p.solve_s for p in passes),
         covariance_s=sum(p.covariance_s for p in passes), passes=len(passes), noise=last.noise,
+        heading_bias_deg=last.heading_bias_deg,
     )
 
 
@@ -657,7 +753,7 @@ def _safe_inverse(A: np.ndarray, floor: float = 1e-12) -> np.ndarray:
 
 
 def _covariance(datas, free, est: BoatParams, scales, wa, x0s, f_d, active, straight,
-                noise=None):
+                noise=None, biases=None):
     """Gauss-Newton covariance of the free parameters, each run's fitted x0 a nuisance.
 
     J = d(simulated measured states)/d(theta, x0) at the optimum; A = J'WJ;
@@ -674,22 +770,25 @@ def _covariance(datas, free, est: BoatParams, scales, wa, x0s, f_d, active, stra
     blocks, resid_rows, chan_rows, weight_rows, series_rows, n_nuisance = [], [], [], [], [], []
     raw_rows = []  # the residuals before whitening, for the RMS shown
     n_series = 0
-    for data, x0 in zip(datas, x0s):
+    for i, (data, x0) in enumerate(zip(datas, x0s)):
         n = data.log.n_samples
         rows = [(k, np.flatnonzero(data.measured[:, c])) for k, c in enumerate(active)
                 if wa[k] > 0]
         rows = [(k, r) for k, r in rows if r.size and (noise is None or active[k] in noise)]
         pinned = _pinned(data, active, wa)
         free_x0 = [k for k in range(len(active)) if k not in pinned]
-        z = ca.MX.sym("z", len(free_x0))
+        n_b = 1 if biases is not None else 0  # the run's heading bias: a nuisance too
+        z = ca.MX.sym("z", len(free_x0) + n_b)
         x0_sym = ca.vertcat(*[z[free_x0.index(k)] if k in free_x0 else x0[k]
                               for k in range(len(active))])
         traj = f_d.mapaccum(n - 1)(x0_sym, _stage_commands(data.log, straight),
                                    ca.repmat(p, 1, n - 1), np.diff(data.log.time_s))
         X = ca.horzcat(x0_sym, traj)
+        if n_b:
+            X = _as_measured(X, z[len(free_x0)])
         pred = ca.vertcat(*[X[k, r.tolist()].T for k, r in rows])
         f = ca.Function("sens", [theta, z], [pred, ca.jacobian(pred, ca.vertcat(theta, z))])
-        pred_v, jac = f(theta_hat, x0[free_x0])
+        pred_v, jac = f(theta_hat, np.concatenate([x0[free_x0], [biases[i]] if n_b else []]))
         resid = np.asarray(pred_v).ravel() - np.concatenate([data.values[r, active[k]]
                                                              for k, r in rows])
         jac = np.asarray(jac)
@@ -710,7 +809,7 @@ def _covariance(datas, free, est: BoatParams, scales, wa, x0s, f_d, active, stra
                                            for j, (_, r) in enumerate(rows)]))
         n_series += len(rows)
         blocks.append(jac)
-        n_nuisance.append(len(free_x0))
+        n_nuisance.append(len(free_x0) + n_b)
     # J: shared parameter columns, then a block of initial-state columns per run
     n_cols = n_free + sum(n_nuisance)
     J = np.zeros((sum(b.shape[0] for b in blocks), n_cols))
@@ -923,11 +1022,11 @@ def identify(logs: Sequence[ManeuverLog], config: SysidConfig = SysidConfig()) -
             # again, each channel weighted by its own residual noise (AR(1), whitened)
             active = [3] if straight else list(range(6))
             wa = np.asarray(weights, float)[active]
-            noise = _estimate_noise(datas, sol.trajectories, active, wa, sol.report.cost) or None
+            noise = _estimate_noise(datas, _measured(sol), active, wa, sol.report.cost) or None
             if noise is not None:
                 sol = _solve_stage(stage, datas, core, sol.params, scales, weights, config,
                                    step, sol.trajectories, straight=straight, noise=noise,
-                                   deadline=deadline)
+                                   deadline=deadline, biases=sol.biases)
                 passes.append(sol.report)
         free = list(core)
         for i, n in enumerate(extras):
@@ -936,7 +1035,7 @@ def identify(logs: Sequence[ManeuverLog], config: SysidConfig = SysidConfig()) -
                 trial = _solve_stage(stage, datas, free + [n],
                                      sol.params.replace(**{n: getattr(start, n)}), scales,
                                      weights, config, step, sol.trajectories, straight=straight,
-                                     noise=noise, deadline=deadline)
+                                     noise=noise, deadline=deadline, biases=sol.biases)
             except SolverTimeLimit:  # out of time: the model so far stands, the rest untried
                 for m in extras[i:]:
                     failed[m] = "not tried: the time limit ran out"
@@ -1027,6 +1126,9 @@ def format_table(result: SysidResult) -> str:
         if st.noise:
             out.append("  weighted by the residual noise, AR(1) (sd, correlation time): " + ", ".join(
                 f"{k} {_display(k, sd)} {tau:.2g} s" for k, (sd, tau) in st.noise.items()))
+        if st.heading_bias_deg:
+            out.append("  heading bias of each run (the log's heading less the fitted one): "
+                       + ", ".join(f"{b:+.2f} deg" for b in st.heading_bias_deg))
     out.append(f"scale: {result.anchor_note}")
     out.append("")
     has_truth = result.truth is not None
@@ -1083,6 +1185,7 @@ def result_to_dict(result: SysidResult) -> dict:
              "ipopt_iterations": s.iterations, "status": s.status, "cost": s.cost,
              "fit_rms": dict(s.rms), "build_s": s.build_s, "solve_s": s.solve_s,
              "covariance_s": s.covariance_s, "passes": s.passes,
+             "heading_bias_deg": list(s.heading_bias_deg),
              "noise": {k: {"sd": sd, "correlation_time_s": clean(tau)}
                        for k, (sd, tau) in s.noise.items()}}
             for s in result.stages

@@ -21,6 +21,18 @@ def _assignment(text: str):
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def params_override(path: str) -> tuple[str, str]:
+    """--params TOML as the --set it stands for: [controller.boat] file = the absolute path
+    (a path in a scenario is read from the scenario's folder; this one from where the command
+    runs). A missing file is named at once."""
+    from controller.errors import InputError
+
+    file = Path(path)
+    if not file.is_file():
+        raise InputError(f"--params {path}: no such parameter file")
+    return ("controller.boat.file", str(file.resolve()))
+
+
 def load_with_overrides(path: str, overrides):
     """The scenario file with the --set overrides applied (each checked as in the file)."""
     from scenarios.scenario_file import load_scenario
@@ -73,6 +85,10 @@ def register(sub) -> None:
     p.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", type=_assignment,
                    help="change a scenario key by its dotted path, as a TOML value (e.g. "
                    "--set current.east_mps=0.2 --set plant.boat.Nr=-2500); repeatable")
+    p.add_argument("--params", metavar="TOML",
+                   help="the controller's model from this parameter file (canalnav sysid -o, "
+                   "canalnav params), the plant keeping the scenario's boat: as --set "
+                   "controller.boat.file=TOML")
     p.add_argument("--out", default=None, help="output folder (default runs/<scenario>-<controller>)")
     p.add_argument("--seed", type=seed_number, default=None,
                    help="noise seed, a whole number >= 0 (default: the scenario's)")
@@ -96,7 +112,10 @@ def run(args) -> int:
     from scenarios.loop.closed_loop import log_progress, terminal_events, terminal_progress
     from scenarios.loop.runner import check_criteria, run_scenario
 
-    scenario = load_with_overrides(args.scenario, args.set)
+    overrides = list(args.set)
+    if args.params:
+        overrides.append(params_override(args.params))
+    scenario = load_with_overrides(args.scenario, overrides)
     if args.water is not None:
         from scenarios.loop.runner import with_water
 
@@ -112,7 +131,7 @@ def run(args) -> int:
                           events=terminal_events(tty), mcap=args.mcap,
                           live=live, cloud_points=args.mcap_points,
                           invocation={"command_line": shlex.join(getattr(args, "argv", [])) or None,
-                                      "overrides": [f"{p}={v!r}" for p, v in args.set]})
+                                      "overrides": [f"{p}={v!r}" for p, v in overrides]})
     if tty:
         sys.stderr.write("\n")
     s, t = result.summary, result.timing

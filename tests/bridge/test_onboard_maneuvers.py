@@ -180,3 +180,21 @@ def test_coasting_distance_from_the_surge_equation():
     d = coast_distance_m(IDENTIFIED, 2.25, 0.2)
     assert 40.0 < d < 55.0  # the paper's boat coasts about 48 m from its top test speed
     assert coast_distance_m(IDENTIFIED, 0.1) == 0.0
+
+
+def test_in_short_water_each_level_is_held_shorter_and_said(boat, lake, tmp_path):
+    """Two levels of 60 s need about 250 m; within a 150 m radius the session holds each
+    shorter (not less than 20 s) so that the run ends in the water, not cut short."""
+    b = boat()
+    runs = (SurgeRun("01_acceleration", "acceleration", (31.0, 50.6), lead_in_s=2.0),)
+    result = start_session(b, lake, runs, tmp_path / "out", hold_s=60.0, radius_m=150.0).run()
+    assert result.exit_code == EXIT_GOAL, result
+    console = b.console.getvalue()
+    assert "the runs need about 01_acceleration" in console
+    held = float(console.split("01_acceleration: each level held ")[1].split(" s")[0])
+    assert 20.0 <= held < 60.0
+    (record,) = result.runs
+    assert not record.cut_short, record.cut_short
+    log = read_log(result.paths[0])
+    assert log.time_s[-1] - log.time_s[0] == pytest.approx(2.0 + 2 * held, abs=1.5)
+    assert np.hypot(*np.array(b.autopilot.true_state[:2])) < 150.0

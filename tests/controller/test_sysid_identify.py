@@ -251,3 +251,41 @@ def test_a_solve_is_capped_by_the_kernel_even_inside_an_iteration():
     assert sol["x"].tolist() == [1.0, 1.0, 1.0] and float(sol["f"].ravel()[0]) == 2.5
     assert stats == {"return_status": "Solve_Succeeded", "iter_count": 3, "success": True}
     assert sysid.cpu_time_s() - c0 >= 0.2  # the child's CPU counts in the budget
+
+
+def _biased(log, bias_rad):
+    """`log` as an EKF with a compass off by `bias_rad` records it: the heading plus the
+    bias, the velocity over ground resolved along that heading."""
+    states = log.states.copy()
+    u, v = states[:, 3].copy(), states[:, 4].copy()
+    states[:, 2] += bias_rad
+    states[:, 3] = u * math.cos(bias_rad) + v * math.sin(bias_rad)
+    states[:, 4] = -u * math.sin(bias_rad) + v * math.cos(bias_rad)
+    return dataclasses.replace(log, states=states)
+
+
+def test_the_heading_bias_measurement_model():
+    """What the sway-yaw stage fits a run's bias with: the heading plus the bias, the
+    velocity over ground resolved along it (2 deg at 2 m/s: a sway of -0.07 m/s)."""
+    import casadi as ca
+
+    log = m.generate(seed=2, noise="none", runs=m.QUICK_RUNS)["03_zigzag_20_50"]
+    bias = math.radians(2.0)
+    ours = np.asarray(sysid._as_measured(ca.DM(log.states.T), bias)).T
+    np.testing.assert_allclose(ours, _biased(log, bias).states, atol=1e-12)
+    straight = np.asarray(sysid._as_measured(ca.DM([0, 0, 0, 2.0, 0, 0]), bias)).ravel()
+    assert straight[4] == pytest.approx(-0.0698, abs=1e-4) and straight[2] == bias
+
+
+def test_the_heading_bias_can_be_left_out():
+    assert sysid.SysidConfig().heading_bias
+    assert not sysid.SysidConfig(heading_bias=False).heading_bias
+
+
+def test_a_stage_that_does_not_converge_names_the_run_and_what_to_try(logs):
+    with pytest.raises(sysid.SolverError) as err:
+        sysid.identify(list(logs.values()), sysid.SysidConfig(max_iter=3))
+    text = str(err.value)
+    assert "did not converge (Maximum_Iterations_Exceeded, 3 iterations) on the run " in text
+    assert "; try: " in text and "--window" in text
+    assert any(name in text for name in logs)
