@@ -123,12 +123,12 @@ def test_every_scenario_example_in_a_readme_loads(tmp_path):
 
 
 OPTION = re.compile(r"(?<![\w-])(--[a-zA-Z][\w-]*)")
-# options of other programs the READMEs show: pip, fmpy, ArduPilot's sim_vehicle.py, dask,
+# options of other programs the READMEs show: pip, fmpy, ArduPilot's sim_vehicle.py and waf, dask,
 # OMSimulator (an option of ours by one of these names would be checked as ours)
 OTHER_TOOLS = {"--no-deps", "--target", "--output-file", "--output-variables", "--show-plot",
                "--output-interval", "--start-values", "--stop-time", "--model",
                "--custom-location", "--add-param-file", "--sim-port-out", "--nthreads",
-               "--stopTime"}
+               "--stopTime", "--board"}
 
 
 def _commands(parser, words=()):

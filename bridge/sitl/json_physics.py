@@ -308,7 +308,8 @@ def _where(addr) -> str:
 
 def sitl_command(parm_file: Path, port: int = DEFAULT_PORT, host: str = DEFAULT_HOST,
                  geodetic_origin: tuple | None = None) -> str:
-    """The sim_vehicle.py command that starts ArduRover (boat) on this backend.
+    """The sim_vehicle.py command that starts ArduRover (boat) on this backend (`-N`: the
+    SITL binary as built, since a rebuild fetches submodules over the network).
 
     `--model JSON:IP` names where SITL sends its packets; instance I sends to 9002 + 10 I,
     any other port goes to the SITL binary as `--sim-port-out` (through `-A`). Home, where
@@ -321,7 +322,7 @@ def sitl_command(parm_file: Path, port: int = DEFAULT_PORT, host: str = DEFAULT_
     target = "127.0.0.1" if host in ("", "127.0.0.1") else host
     if target in ("0.0.0.0", "::"):
         target = "<this machine's address>"
-    parts = ["sim_vehicle.py -v Rover -f motorboat", f"--model JSON:{target}",
+    parts = ["sim_vehicle.py -v Rover -f motorboat -N", f"--model JSON:{target}",
              f"--add-param-file={parm_file}"]
     instance, rest = divmod(port - DEFAULT_PORT, 10)
     if port != DEFAULT_PORT:

@@ -21,6 +21,7 @@ def _commands() -> list[str]:
 def test_the_commands_in_the_sitl_readme_are_what_sitl_physics_prints(capsys, monkeypatch):
     physics, sitl, bridge = _commands()
     assert physics.startswith("canalnav sitl-physics ") and sitl.startswith("sim_vehicle.py ")
+    assert " -N " in sitl  # no rebuild: it would need the network (issue 37, 5)
     assert bridge.startswith("canalnav bridge ")
     monkeypatch.chdir(ROOT)  # the paths in the commands are relative to the checkout
     args = physics.split()[1:] + ["--port", "0", "--duration", "0.1"]

@@ -447,7 +447,7 @@ def test_command_line(tmp_path, capsys):
     out = capsys.readouterr()
     line, then = out.out.strip().splitlines()
     assert "udp 127.0.0.1:" in line
-    assert "sim_vehicle.py -v Rover -f motorboat --model JSON:127.0.0.1" in line
+    assert "sim_vehicle.py -v Rover -f motorboat -N --model JSON:127.0.0.1" in line
     assert "sitl_boat.parm" in line and "--custom-location=52.00000000,4.50000000,0,0" in line
     assert then == (f"then drive it with: canalnav bridge --connect udp:127.0.0.1:14550 "
                     f"--scenario {path} --mode MANUAL --arm")  # the scenario has an [origin]
