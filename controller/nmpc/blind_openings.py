@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from ..geometry import segments_cross, segments_to_endpoints
+from ..geometry import segments_cross, segments_to_endpoints, segments_touch
 
 from .reference import WaypointPath
 
@@ -52,7 +52,7 @@ def blind_opening_ahead(path: WaypointPath, progress_m: float, boat_xy, segments
     for side in (1.0, -1.0):
         far = xy + side * depth_m * normal  # (n, 2) the far ends of the side rays
         seen = np.hypot(*(far - boat).T) <= lookahead_m  # beyond, no segment means nothing
-        k = np.flatnonzero(seen & ~_meets(xy, far, a, b).any(axis=1))  # the open samples
+        k = np.flatnonzero(seen & ~segments_touch(xy, far, a, b).any(axis=1))  # open
         if not len(k):
             continue
         k = k[_banked(s[k], side, path, a, b, step_m)]  # a side canal, not a missed wall
@@ -83,17 +83,6 @@ def _banked(s_open: np.ndarray, side: float, path: WaypointPath, a, b, step_m: f
     lo = np.minimum(s_a, s_b)[bank] - reach_m - step_m
     hi = np.maximum(s_a, s_b)[bank] + reach_m + step_m
     return ((s_open[:, None] >= lo[None]) & (s_open[:, None] <= hi[None])).any(axis=1)
-
-
-def _meets(p, q, a, b) -> np.ndarray:
-    """(N, M) mask: segment p_i-q_i crosses or touches segment a_j-b_j (a ray through a
-    vertex where two walls meet meets them; `segments_cross` wants a proper crossing)."""
-    def side(o, u, w):
-        return (u[..., 0] - o[..., 0]) * (w[..., 1] - o[..., 1]) - (
-            u[..., 1] - o[..., 1]) * (w[..., 0] - o[..., 0])
-
-    P, Q, A, B = p[:, None], q[:, None], a[None], b[None]
-    return (side(A, B, P) * side(A, B, Q) <= 0) & (side(P, Q, A) * side(P, Q, B) <= 0)
 
 
 def blind_speed_cap(distance_m: float, speed_mps: float, decel_mps2: float) -> float:

@@ -212,14 +212,14 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
     x0, y0, psi = (float(v) for v in pose)
     c, s = math.cos(psi), math.sin(psi)
     walls = wall_segments(segments, cfg, known_walls)
-    lines = segments[walls]
+    wall_lines = segments[walls]  # this scan's (a remembered line may run on across a side
+    # canal's mouth: `behind_a_wall_end` wants the walls seen now)
+    lines = wall_lines
     if known_walls is not None and len(known_walls):
         lines = np.concatenate([lines, np.asarray(known_walls)[:, :4]])
-    wall_lines = np.asarray(segments, float).reshape(-1, 4)[walls]  # this scan's (a
-    # remembered line may run on across a side canal's mouth)
     xy = xy_body
     if walls.any():
-        xy = xy[~_on_walls(xy, segments[walls], (x0, y0, c, s), cfg)]
+        xy = xy[~_on_walls(xy, wall_lines, (x0, y0, c, s), cfg)]
     wall_points = _NO_POINTS
     if collect_wall_points and len(segments):
         confident = chained_walls(np.asarray(segments, float).reshape(-1, 4), cfg)
@@ -289,11 +289,11 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
         mid = 0.5 * (pu.max() + pu.min()) * u + 0.5 * (pv.max() + pv.min()) * v
         if lv > lu:
             theta, lu, lv = theta + math.pi / 2, lv, lu
+        inertial = pts @ np.array([[c, s], [-s, c]]) + (x0, y0)
         if lu > cfg.max_vessel_length_m or (len(lines) and _along_wall(hull, theta, lines, frame, cfg)) \
                 or (wall_cells is not None and fraction_on(
-                    wall_cells, pts @ np.array([[c, s], [-s, c]]) + (x0, y0),
-                    cfg.wall_cells_m) >= cfg.wall_cells_share) \
-                or behind_a_wall_end(pts @ np.array([[c, s], [-s, c]]) + (x0, y0),
+                    wall_cells, inertial, cfg.wall_cells_m) >= cfg.wall_cells_share) \
+                or behind_a_wall_end(inertial,
                                      np.array([math.cos(theta + psi), math.sin(theta + psi)]),
                                      (x0, y0), wall_lines):
             from_side.pop()

@@ -6,7 +6,8 @@ import time
 
 import numpy as np
 
-from controller.geometry import clip_segments_to_circle, polyline_legs, simplify_polyline
+from controller.geometry import (clip_segments_to_circle, polyline_legs, segments_cross,
+                                 simplify_polyline)
 from scenarios.world.canal import CanalWorld
 
 
@@ -30,7 +31,6 @@ class KnownWalls:
         self._lines = lines
         self._legs: dict = {}  # which lines are present -> their legs
         self._vessels = tuple(world.vessels)
-        self._world, self._air_draft_m = world, air_draft_m
         self._last_seen: dict[int, float] = {}  # vessel index -> when last in sight
 
     def perceive(self, time_s, true_state, estimated_state):
@@ -64,7 +64,7 @@ class KnownWalls:
             pose = v.pose_at(time_s)
             if np.hypot(*(pose[:2] - eye)) > self.range_m + v.hull.length_m:
                 continue
-            if self._in_sight(eye, np.vstack([v.outline_at(time_s), pose[:2]])):
+            if self._in_sight(time_s, eye, np.vstack([v.outline_at(time_s), pose[:2]])):
                 self._last_seen[k] = time_s
             elif time_s - self._last_seen.get(k, -np.inf) > TrackerConfig.max_coast_s:
                 continue
@@ -72,18 +72,23 @@ class KnownWalls:
                                         v.hull.length_m, v.hull.beam_m))
         return tuple(out)
 
-    def _in_sight(self, eye, points) -> bool:
-        """Whether any of `points` is seen from `eye` along a line that crosses no wall or
-        obstacle (those a beam at the LiDAR's height meets)."""
-        edge = np.full(len(points), -1)
-        return bool(self._world.line_of_sight(eye, points, edge, self._air_draft_m).any())
+    def _in_sight(self, time_s, eye, points) -> bool:
+        """Whether any of `points` is seen from `eye` along a line that crosses none of the
+        walls and obstacles present at `time_s` (those a beam at the LiDAR's height meets)."""
+        a, b = self._present_legs(time_s)
+        lines = np.broadcast_to(eye, points.shape)
+        return bool((~segments_cross(lines, points, a, b).any(axis=1)).any())
 
     def segments(self, time_s, true_state, estimated_state) -> np.ndarray:
+        a, b = self._present_legs(time_s)
+        return clip_segments_to_circle(a, b, np.asarray(true_state)[:2], self.range_m)
+
+    def _present_legs(self, time_s) -> tuple[np.ndarray, np.ndarray]:
+        """The legs (a, b) of the walls and obstacles present at `time_s` (cached)."""
         key = tuple(r is None or time_s < r for r in self._removed)
         if key not in self._legs:
             self._legs[key] = polyline_legs([p for p, here in zip(self._lines, key) if here])
-        a, b = self._legs[key]
-        return clip_segments_to_circle(a, b, np.asarray(true_state)[:2], self.range_m)
+        return self._legs[key]
 
 
 def tracker_config(lidar_config=None, detection=None):
