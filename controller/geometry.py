@@ -186,8 +186,11 @@ def simplify_polyline(points, tolerance_m: float) -> np.ndarray:
     return pts[keep]
 
 
-def segments_cross(a1, b1, a2, b2) -> np.ndarray:
-    """(N, M) mask: segment i of (a1, b1) properly crosses segment j of (a2, b2)."""
+def segments_cross(a1, b1, a2, b2, closed: bool = False) -> np.ndarray:
+    """(N, M) mask: segment i of (a1, b1) properly crosses segment j of (a2, b2). `closed`:
+    touching counts too (an end on the other segment, a ray through a vertex where two walls
+    meet), at the price of collinear segments counting even when apart; `segments_touch`
+    is exact, and slower."""
     def cross(o, p, q):
         return (p[..., 0] - o[..., 0]) * (q[..., 1] - o[..., 1]) - (
             p[..., 1] - o[..., 1]) * (q[..., 0] - o[..., 0])
@@ -196,6 +199,8 @@ def segments_cross(a1, b1, a2, b2) -> np.ndarray:
     A2, B2 = a2[None, :, :], b2[None, :, :]
     d1, d2 = cross(A2, B2, A1), cross(A2, B2, B1)
     d3, d4 = cross(A1, B1, A2), cross(A1, B1, B2)
+    if closed:
+        return (d1 * d2 <= 0) & (d3 * d4 <= 0)
     return (d1 * d2 < 0) & (d3 * d4 < 0)
 
 

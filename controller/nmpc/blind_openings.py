@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from ..geometry import segments_cross, segments_to_endpoints, segments_touch
+from ..geometry import segments_cross, segments_to_endpoints
 
 from .reference import WaypointPath
 
@@ -52,7 +52,9 @@ def blind_opening_ahead(path: WaypointPath, progress_m: float, boat_xy, segments
     for side in (1.0, -1.0):
         far = xy + side * depth_m * normal  # (n, 2) the far ends of the side rays
         seen = np.hypot(*(far - boat).T) <= lookahead_m  # beyond, no segment means nothing
-        k = np.flatnonzero(seen & ~segments_touch(xy, far, a, b).any(axis=1))  # open
+        open_ = ~segments_cross(xy, far, a, b, closed=True).any(axis=1)  # through a
+        # vertex where two walls meet is no way through
+        k = np.flatnonzero(seen & open_)
         if not len(k):
             continue
         k = k[_banked(s[k], side, path, a, b, step_m)]  # a side canal, not a missed wall
