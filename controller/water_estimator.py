@@ -68,8 +68,13 @@ class WaterEstimatorConfig:
     noise_learning: float = 0.1
     current_walk: float = 0.004  # m/s per sqrt(s): how fast the current along the boat may
     # change (slowly: it is read from the surge, where a model error looks the same) ...
-    current_walk_across: float = 0.03  # ... and across it (sway sees it at once, so the
-    # filter may follow a side inflow as fast as the boat runs into it)
+    current_walk_across: float = 0.01  # ... and across it in steady water (at 0.03 an
+    # autopilot EKF's sway noise moved the estimate by 0.03 m/s rms in still water) ...
+    current_walk_drift: float = 0.04  # ... and across while the sway's innovations keep one
+    # sign (`drift_windows` in a row summing past `drift_sigma`): the boat runs into a side
+    # inflow, and the filter follows it as fast as the boat meets it
+    drift_windows: int = 3
+    drift_sigma: float = 2.0
     bias_walk: tuple[float, float, float] = (2e-4, 3e-3, 2e-3)  # per sqrt(s): in sway and yaw faster, so
     # that errors of the model in turns (masses, yaw damping) go to the bias, not the current
     current_sigma0: float = 0.5  # m/s, prior spread of the current
@@ -90,6 +95,7 @@ class WaterEstimatorConfig:
 
     def __post_init__(self) -> None:
         for name in ("window_s", "period_s", "current_walk", "current_walk_across",
+                     "current_walk_drift", "drift_windows", "drift_sigma",
                      "current_sigma0", "gate_sigma",
                      "max_jump_m", "steady_du_mps", "steady_dr_radps", "steady_dnT_pct",
                      "noise_learning"):
@@ -134,18 +140,22 @@ class WaterEstimate:
 
 
 def usable_current(estimate: WaterEstimate, heading_rad: float, prior_sigma: float,
-                   along_sigma: float = 0.1) -> np.ndarray:
+                   along_sigma: float = 0.1, settle_windows: int = 10) -> np.ndarray:
     """The current to hand the controller: the estimate along and across the boat, each
     part weighted by the evidence behind it.
 
     Across the boat (what keeps the boat on its line, and what a heading bias of the
     autopilot's EKF looks like), sway sees a current at once: the part is weighted by the
     share of the prior's spread the data have explained, w = 1 - (sigma / prior_sigma)^2,
-    near 0 before the first windows and near 1 once known, so it is used in full in
-    steady running and no offset is left. Along the boat a current looks like a drag
-    error and a second's window tells little (sigma ~0.2 m/s after ten windows of an
-    autopilot's EKF): handed over early, the navigation's noise steered the boat as a head
-    current of 0.3 m/s; so that part counts only as it becomes known to `along_sigma`,
+    and, through the first `settle_windows` windows, by how far it stands out of its own
+    spread: from none at one sigma to all of it at two. A current of tenths of a metre a
+    second is handed over in full after a window or two, while one window of an autopilot
+    EKF's sway noise (correlated over about a second) is no longer steered by as a side
+    current of 0.07 m/s at the start. After that the part is used in full (a significance
+    test there held back part of a heading bias's stand-in in bends), so no offset is left. Along the boat a current looks
+    like a drag error and a second's window tells little (sigma ~0.2 m/s after ten windows
+    of an autopilot's EKF): handed over early, the navigation's noise steered the boat as a
+    head current of 0.3 m/s; so that part counts only as it becomes known to `along_sigma`,
     w = 1 - (sigma / along_sigma)^2. What is not handed over there only changes the speed,
     which the NMPC's feedback holds."""
     cov = estimate.current_cov
@@ -156,6 +166,9 @@ def usable_current(estimate: WaterEstimate, heading_rad: float, prior_sigma: flo
     body = rot @ np.asarray(estimate.current_ne, float)
     var = np.einsum("ij,jk,ik->i", rot, cov, rot)
     weight = np.clip(1.0 - var / np.array([along_sigma, prior_sigma]) ** 2, 0.0, 1.0)
+    if estimate.updates < settle_windows:
+        z = abs(body[1]) / math.sqrt(var[1]) if var[1] > 0 else math.inf
+        weight[1] *= min(1.0, max(0.0, z - 1.0))
     return rot.T @ (weight * body)
 
 
@@ -204,6 +217,8 @@ class WaterEstimator:
         self.reopened = 0  # times the water changed faster than the random walk allows
         self.unsteady = 0  # windows left out because the boat sped up or started a turn
         self._gated_in_row = 0
+        self._sway_z: deque = deque(maxlen=int(c.drift_windows))  # normalised sway innovations
+        self.drifting = 0  # windows in which the across current walked fast
 
     @property
     def estimate(self) -> WaterEstimate:
@@ -266,6 +281,7 @@ class WaterEstimator:
         if ramp:  # the surge of this window is the throttle's lag, not the water
             ekf.R[0, 0] = 1e4
         S = H @ ekf.P @ H.T + ekf.R
+        self._sway_z.append(float(y[1] / math.sqrt(S[1, 1])))
         if float(y @ np.linalg.solve(S, y)) > c.gate_sigma**2:
             self._gated_in_row += 1
             if self._gated_in_row < c.reopen_after:
@@ -299,7 +315,11 @@ class WaterEstimator:
         c = self.config
         ch, sh = math.cos(heading_rad), math.sin(heading_rad)
         rot = np.array([[ch, -sh], [sh, ch]])  # body (along, across) to NED
-        walk = rot @ np.diag([c.current_walk**2, c.current_walk_across**2]) @ rot.T
+        z = self._sway_z
+        drift = len(z) == z.maxlen and abs(sum(z)) > c.drift_sigma * math.sqrt(len(z))
+        self.drifting += drift
+        across = c.current_walk_drift if drift else c.current_walk_across
+        walk = rot @ np.diag([c.current_walk**2, across**2]) @ rot.T
         self._ekf.Q[:2, :2] = c.window_s * walk
 
     def _reopen(self) -> None:

@@ -27,11 +27,12 @@ from .rigs import SimRig
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _drive(tmp_path, bias_deg: float):
-    """straight.toml through the bridge; (true cross-track per step, steps.csv rows)."""
-    scenario = load_scenario(ROOT / "scenarios" / "straight.toml")
+def _drive(tmp_path, bias_deg: float, wander_deg: float = 0.0, name: str = "straight"):
+    """A scenario file through the bridge; (true cross-track per step, steps.csv rows)."""
+    scenario = load_scenario(ROOT / "scenarios" / f"{name}.toml")
     rig = SimRig(scenario, tmp_path, seed=4, ekf_delay_s=5.0,
-                 ekf_noise=NoiseSpec(heading_bias_rad=math.radians(bias_deg)))
+                 ekf_noise=NoiseSpec(heading_bias_rad=math.radians(bias_deg),
+                                     heading_wander_sigma_rad=math.radians(wander_deg)))
     sim, link = rig.autopilot, rig.link
     truth = {}
     rig.clock.add_peer(lambda now: truth.__setitem__(round(sim.boot_s, 2), sim.true_state[:2]))
@@ -52,20 +53,33 @@ def _drive(tmp_path, bias_deg: float):
     return d, rows
 
 
+def _column(rows, name):
+    return np.array([float(r[name]) for r in rows])
+
+
 @pytest.mark.slow
-def test_a_heading_bias_leaves_no_steady_offset_and_no_start_up_current(tmp_path):
-    d0, _ = _drive(tmp_path / "none", 0.0)
-    d2, rows = _drive(tmp_path / "biased", 2.0)
-    xt0, xt2 = (float(np.abs(d[len(d) // 3:]).mean()) for d in (d0, d2))
-    assert xt2 <= xt0 + 0.15, (xt0, xt2)
-    # along the boat: what the NMPC was handed in the first 30 s (across, the current stands
-    # for the bias: about u sin 2 deg = 0.07 m/s, as it should)
-    t = np.array([float(r["time_s"]) for r in rows])
-    used = np.array([[float(r["current_used_n_mps"]), float(r["current_used_e_mps"])]
-                     for r in rows])
-    psi = np.array([float(r["psi_rad"]) for r in rows])
-    along = used[:, 0] * np.cos(psi) + used[:, 1] * np.sin(psi)
-    assert np.abs(along[t < 30]).max() <= 0.05
+@pytest.mark.parametrize("name", ["straight", "sbend"])
+def test_a_heading_bias_leaves_no_steady_offset_and_no_start_up_current(tmp_path, name):
+    """Issue 37's bar: mean true cross-track over the last two thirds at most 0.15 m above
+    the unbiased run, with a constant 2 degree bias and with a 0.5 degree wander; no
+    current above 0.05 m/s handed over in the first 30 s where the water is still and the
+    heading true on average (across the boat a constant bias's stand-in, about
+    u sin 2 deg = 0.07 m/s, is what removes the offset, and is handed over as it should)."""
+    d0, rows0 = _drive(tmp_path / "none", 0.0, name=name)
+    xt0 = float(np.abs(d0[len(d0) // 3:]).mean())
+    for label, bias, wander in (("constant", 2.0, 0.0), ("wandering", 0.0, 0.5)):
+        d, rows = _drive(tmp_path / label, bias, wander, name=name)
+        xt = float(np.abs(d[len(d) // 3:]).mean())
+        assert xt <= xt0 + 0.15, (label, xt0, xt)
+        t, psi = _column(rows, "time_s"), _column(rows, "psi_rad")
+        n, e = _column(rows, "current_used_n_mps"), _column(rows, "current_used_e_mps")
+        along = n * np.cos(psi) + e * np.sin(psi)
+        assert np.abs(along[t < 30]).max() <= 0.05, label
+        if bias == 0.0:
+            assert np.hypot(n, e)[t < 30].max() <= 0.05, label
+    t0 = _column(rows0, "time_s")
+    used0 = np.hypot(_column(rows0, "current_used_n_mps"), _column(rows0, "current_used_e_mps"))
+    assert used0[t0 < 30].max() <= 0.05  # (one window of sway noise was handed over as 0.07)
 
 
 def test_the_bias_is_in_the_heading_and_nowhere_else():
