@@ -11,10 +11,11 @@ rules decide where the reference asks it to be, so that it passes the way other 
   instead of backing away from a vessel it can pass.
 - Overtaking (Rules 9(e) and 13): a slower vessel ahead going the same way: pass it on its port
   side where the channel leaves room beside it (two hull circles and both separations, 2 R_b
-  + d_v + d_p), else on its starboard side; with room on neither, or a bend of more than
-  `bend_deg` before the boat would be past it (Rule 9(f): what comes round the bend is not
-  seen), follow it: no faster than it goes, and stop short of it by `follow_gap_m` (its
-  stern to our bow).
+  + d_v + d_p), else on its starboard side, never on the side a vessel given way to is
+  crossing to (Rule 15: the boat passes astern of it); with room on neither, or a bend of
+  more than `bend_deg` before the boat would be past it (Rule 9(f): what comes round the
+  bend is not seen), follow it: no faster than it goes, and stop short of it by
+  `follow_gap_m` (its stern to our bow).
 - Crossing (Rule 15): a vessel that will cross the route ahead from the starboard side while
   the boat would be there is given way to by slowing: the reference stops short of the
   crossing point until the vessel has cleared it (passing astern of it). A small craft
@@ -96,6 +97,7 @@ def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed
         return room_here[0]
 
     overtakes = []  # (track, s, d, half_len, half_wid, along, port_gap, stbd_gap)
+    heading_to = set()  # the sides (+1 starboard, -1 port) vessels given way to cross to
     tracks = list(tracks)
     positions = np.array([np.asarray(tr.position, float).reshape(2) for tr in tracks])
     # every vessel on the path at once (the same answer as one at a time)
@@ -141,6 +143,7 @@ def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed
                     kind = "stand_on"
                 if kind != "stand_on":
                     stop = at if stop is None else min(stop, at)
+                    heading_to.add(1.0 if across > 0 else -1.0)
         elif abs(along) < 0.5 or abs(along) < abs(across):
             kind = "clear"  # drifting, or moving away across the route: the slot keeps clear
         elif along < 0 and ahead > 0:
@@ -181,9 +184,11 @@ def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed
             stop = at if stop is None else min(stop, at)
             reasons.append(f"following {tr.id}: a bend ahead before the boat would be past")
             continue
-        if meet_offset == 0.0 and port_gap >= need:  # the boat's place: clear of both
+        # never across the way of a vessel given way to: not to the side it is crossing to
+        # (Rule 15: pass astern of it, so on the side it comes from)
+        if meet_offset == 0.0 and port_gap >= need and -1.0 not in heading_to:
             side, target = "port", max(d - half_wid - dv - Rb, -(port - Rb - dp))
-        elif meet_offset == 0.0 and stbd_gap >= need:
+        elif meet_offset == 0.0 and stbd_gap >= need and 1.0 not in heading_to:
             side, target = "starboard", min(d + half_wid + dv + Rb, stbd - Rb - dp)
         if side is not None:
             pass_offsets.append(target)
@@ -194,7 +199,8 @@ def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed
         at = s - half_len - bow_m - follow_gap_m
         stop = at if stop is None else min(stop, at)
         reasons.append(f"following {tr.id}: no room to overtake"
-                       + (" with a vessel coming the other way" if meet_offset else ""))
+                       + (" with a vessel coming the other way" if meet_offset else
+                          " clear of a vessel crossing" if heading_to else ""))
     offset = meet_offset if meet_offset else (
         min(pass_offsets, key=abs) if pass_offsets else 0.0)
     if speed_cap is not None:

@@ -105,3 +105,23 @@ def test_a_vessel_given_way_to_stays_so_while_it_crosses():
     gone = Track(3, (30.0, 20.0), (0.0, 1.5), length_m=9.0)  # crossed: nothing to give way to
     assert assess([gone], path, 0.0, 0.0, 2.0, segs, give_way_to=frozenset({3}),
                   **kw).encounters[0].kind != "give_way"
+
+
+def test_no_overtaking_pass_on_the_side_a_vessel_given_way_to_is_crossing_to():
+    """Rule 15, pass astern of the vessel given way to (fuzz seed 1, case 24): a slow launch
+    to starboard would be overtaken on its port side, but a kayak drifting across toward port
+    is given way to; a port pass would put the boat where the kayak is going, so the boat
+    follows the launch instead. A kayak drifting toward starboard leaves the port pass."""
+    path, segs = _channel(((0, 0), (300, 0)))
+    kw = dict(hull_radius_m=2.0, separation_m=2.0, vessel_separation_m=2.0, bow_m=2.0)
+    launch = Track(1, (30.0, 4.0), (0.8, 0.0))
+    to_port = assess([launch, Track(2, (25.0, 3.0), (0.0, -0.35), 3.5, 0.8)], path, 0.0, 0.0,
+                     2.0, segs, **kw)
+    kinds = {e.track_id: e.kind for e in to_port.encounters}
+    assert kinds == {1: "following", 2: "give_way"}
+    assert to_port.offset_m == 0.0 and "clear of a vessel crossing" in to_port.reason
+    to_stbd = assess([launch, Track(2, (25.0, -3.0), (0.0, 0.35), 3.5, 0.8)], path, 0.0, 0.0,
+                     2.0, segs, **kw)
+    kinds = {e.track_id: e.kind for e in to_stbd.encounters}
+    assert kinds == {1: "overtaking", 2: "give_way"}
+    assert to_stbd.offset_m < 0.0
