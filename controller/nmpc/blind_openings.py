@@ -9,7 +9,8 @@ sampled every `step_m`; at each sample a ray is cast to either side: an *opening
 where the ray runs `depth_m` without meeting a segment (a side canal, a basin's mouth), and it
 is *blind* when the line from the boat to the ray's far end crosses a segment (the corner's
 wall is in the way). The reference speed is capped so that the boat comes to the first blind
-opening at `speed_mps`: v <= sqrt(speed^2 + 2 a (s_open - margin - s)).
+opening at `speed_mps`: v <= sqrt(speed^2 + 2 a (s_open - margin - s)); a boat over the cap
+is asked for as much less again, since the NMPC follows a slower reference with a lag.
 
 Why it does not slow the boat for nothing: an opening must have a bank running away from the
 channel beside it (the side canal's wall), which a stretch of quay the scan missed has not;
@@ -87,7 +88,15 @@ def _banked(s_open: np.ndarray, side: float, path: WaypointPath, a, b, step_m: f
     return ((s_open[:, None] >= lo[None]) & (s_open[:, None] <= hi[None])).any(axis=1)
 
 
-def blind_speed_cap(distance_m: float, speed_mps: float, decel_mps2: float) -> float:
+def blind_speed_cap(distance_m: float, speed_mps: float, decel_mps2: float,
+                    boat_speed_mps: float | None = None) -> float:
     """The highest speed from which braking at `decel_mps2` comes down to `speed_mps` within
-    `distance_m` (`speed_mps` itself once the distance is used up)."""
-    return math.sqrt(speed_mps * speed_mps + 2.0 * decel_mps2 * max(distance_m, 0.0))
+    `distance_m` (`speed_mps` itself once the distance is used up). With the boat's speed
+    `boat_speed_mps` above that, as much less again (down to half the cap): the NMPC
+    follows a slower reference with a lag (a fuzz case came to a blind side canal at 1.5 m/s
+    for a cap of 1.0 and met the vessel coming out at 0.05 m), so a boat over the cap is
+    asked to brake the harder, and is at the cap by the opening."""
+    cap = math.sqrt(speed_mps * speed_mps + 2.0 * decel_mps2 * max(distance_m, 0.0))
+    if boat_speed_mps is not None and boat_speed_mps > cap:
+        cap = max(2.0 * cap - boat_speed_mps, 0.5 * cap)
+    return cap

@@ -490,7 +490,8 @@ class NmpcController:
         if rules.stop_at_m is not None:
             stop_at = rules.stop_at_m if stop_at is None else min(stop_at, rules.stop_at_m)
         ref_speed = speed if rules.speed_mps is None else min(speed, rules.speed_mps)
-        ref_speed, blind = self._blind_speed(float(s[0]), x[:2], segs, ref_speed)
+        ref_speed, blind = self._blind_speed(float(s[0]), x[:2], segs, ref_speed,
+                                             float(x[3]))
         if blind:
             rules = replace(rules, reason=f"{rules.reason}; {blind}" if rules.reason else blind)
         offset = self._line(rules.offset_m)
@@ -554,9 +555,10 @@ class NmpcController:
             self._rules_stop = None
         return rules
 
-    def _blind_speed(self, s: float, xy: np.ndarray, segments, speed: float):
-        """The reference speed capped for the first blind opening ahead (`blind_openings`),
-        and what to say of it ("" when nothing is capped)."""
+    def _blind_speed(self, s: float, xy: np.ndarray, segments, speed: float,
+                     surge_mps: float):
+        """The reference speed capped for the first blind opening ahead (`blind_openings`)
+        for a boat going at `surge_mps`, and what to say of it ("" when nothing is capped)."""
         c = self.config
         if not c.blind_speed_mps or speed <= c.blind_speed_mps:  # 0 or None: no rule
             return speed, ""
@@ -564,9 +566,10 @@ class NmpcController:
                                  c.blind_depth_m)
         if at is None:
             return speed, ""
-        cap = blind_speed_cap(at - c.blind_margin_m - s, c.blind_speed_mps, c.stop_decel_mps2)
-        if cap >= speed:
+        distance = at - c.blind_margin_m - s
+        if blind_speed_cap(distance, c.blind_speed_mps, c.stop_decel_mps2) >= speed:
             return speed, ""
+        cap = blind_speed_cap(distance, c.blind_speed_mps, c.stop_decel_mps2, surge_mps)
         return cap, f"blind opening {at - s:.0f} m ahead: {cap:.1f} m/s"
 
     def _stop(self, s: float, d: float, x: np.ndarray, segments, elapsed_s: float,
