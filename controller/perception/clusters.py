@@ -31,6 +31,7 @@ import numpy as np
 from . import opencv
 from ..kernels import pointer
 from .cloud_crop import occupancy_kernel
+from .cluster_cells import cluster_kernel, cluster_members_compiled, sociable_points_compiled
 from .wall_cells import fraction_on
 
 # `cfg` below is a `tracking.TrackerConfig` (it holds the thresholds); not imported, so that
@@ -228,25 +229,18 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
             wall_points = on @ np.array([[c, s], [-s, c]]) + (x0, y0)
     r = det.range_m
     n = int(math.ceil(2 * r / cfg.cell_m))
-    i = np.floor((xy[:, 0] + r) * (1.0 / cfg.cell_m)).astype(np.intp)
-    j = np.floor((xy[:, 1] + r) * (1.0 / cfg.cell_m)).astype(np.intp)
-    inside = (i >= 0) & (i < n) & (j >= 0) & (j < n)
-    xy, i, j = xy[inside], i[inside], j[inside]
-    # A lone return (no other within a cell or so: a ray through a gap, speckle) would
-    # stretch the box of the cluster it joins by metres: drop it.
-    flat = i * n + j
-    count = np.bincount(flat, minlength=n * n).reshape(n, n).astype(np.float32)
-    company = cv2.boxFilter(count, -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
-    social = company[i, j] >= 2
-    xy, i, j = xy[social], i[social], j[social]
-    grid = np.zeros((n, n), np.uint8)
-    grid[i, j] = 1
+    lib = cluster_kernel()
+    if lib is not None:
+        xy, i, j, grid = sociable_points_compiled(lib, xy, r, cfg.cell_m, n)
+    else:
+        xy, i, j, grid = sociable_points_numpy(xy, r, cfg.cell_m, n)
     grid = cv2.dilate(grid, np.ones((3, 3), np.uint8))
     n_labels, labels = cv2.connectedComponents(grid, connectivity=8)
     # Pieces of one face that the detector's segment runs through are one cluster (a hull
     # side seen at a glancing angle falls apart between the beams' rings).
     others = segments[~walls]
     comp, seg = _face_pairs(others, labels, (x0, y0, c, s), cfg)
+    labels_cv, root = labels, None
     if len(comp) > 1:
         root = np.arange(n_labels)
         first_comp = {}
@@ -264,13 +258,11 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
     for k, m in zip(comp.tolist(), seg.tolist()):
         face_of.setdefault(k, set()).add(m)
     face_of = {k: ends[sorted(v)] for k, v in face_of.items()}
-    point_label = labels[i, j]
-    count = np.bincount(point_label, minlength=n_labels)
-    count[0] = 0  # background (no point has it)
-    good = np.flatnonzero(count >= cfg.min_points)
-    kept = np.flatnonzero(count[point_label] >= cfg.min_points)  # (sort only these)
-    order = kept[np.argsort(point_label[kept], kind="stable")]
-    first = np.searchsorted(point_label[order], good)
+    if lib is not None:
+        count, good, order, first = cluster_members_compiled(lib, i, j, labels_cv, root, n_labels,
+                                                             cfg.min_points)
+    else:
+        count, good, order, first = cluster_members_numpy(i, j, labels, n_labels, cfg.min_points)
     side_angle = _side_angles(segments[~walls], labels, n_labels, (x0, y0, c, s, psi), cfg)
     frame = (x0, y0, c, s, psi)
     centre, angle, size, counts, hulls, edges, from_side, faces = [], [], [], [], [], [], [], []
@@ -318,6 +310,44 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
                     np.asarray(counts, int), hulls, tuple(edges), walls,
                     xy_body if occluders is None else occluders, (x0, y0, psi), tuple(faces),
                     *_viewpoints(cfg, hull_returns), wall_points)
+
+
+def sociable_points_numpy(xy: np.ndarray, r: float, cell: float, n: int):
+    """The points (N, 2) in the (n, n) grid of `cell` with its corner at (-r, -r), less the
+    lone returns (no other within a cell or so: a ray through a gap, speckle, which would
+    stretch the box of the cluster it joins by metres): (the kept points, their cells i and
+    j, the uint8 grid with 1 at their cells). The numpy twin of the kernel
+    `cluster_cells.c` (`sociable_points`)."""
+    cv2 = opencv.cv2()
+    i = np.floor((xy[:, 0] + r) * (1.0 / cell)).astype(np.intp)
+    j = np.floor((xy[:, 1] + r) * (1.0 / cell)).astype(np.intp)
+    inside = (i >= 0) & (i < n) & (j >= 0) & (j < n)
+    xy, i, j = xy[inside], i[inside], j[inside]
+    flat = i * n + j
+    count = np.bincount(flat, minlength=n * n).reshape(n, n).astype(np.float32)
+    company = cv2.boxFilter(count, -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
+    social = company[i, j] >= 2
+    xy, i, j = xy[social], i[social], j[social]
+    grid = np.zeros((n, n), np.uint8)
+    grid[i, j] = 1
+    return xy, i, j, grid
+
+
+def cluster_members_numpy(i: np.ndarray, j: np.ndarray, labels: np.ndarray, n_labels: int,
+                          min_points: int):
+    """The members of each component (`labels` (n, n), 0 the background) among the points
+    at cells (i, j): (points per label, the labels with at least `min_points`, the indices
+    of those labels' points grouped by label in ascending order and each group in the
+    points' order, where each such label's group starts). The numpy twin of the kernel
+    `cluster_cells.c` (`cluster_members`)."""
+    point_label = labels[i, j]
+    count = np.bincount(point_label, minlength=n_labels)
+    count[0] = 0  # background (no point has it)
+    good = np.flatnonzero(count >= min_points)
+    kept = np.flatnonzero(count[point_label] >= min_points)  # (sort only these)
+    order = kept[np.argsort(point_label[kept], kind="stable")]
+    first = np.searchsorted(point_label[order], good)
+    return count, good, order, first
 
 
 def behind_a_wall_end(xy: np.ndarray, axis: np.ndarray, sensor, walls: np.ndarray,
