@@ -32,6 +32,7 @@ from . import opencv
 from ..kernels import pointer
 from .cloud_crop import occupancy_kernel
 from .cluster_cells import cluster_kernel, cluster_members_compiled, sociable_points_compiled
+from .wall_chains import chain_kernel, chained_walls_compiled
 from .wall_cells import fraction_on
 
 # `cfg` below is a `tracking.TrackerConfig` (it holds the thresholds); not imported, so that
@@ -125,7 +126,18 @@ def wall_segments(segments: np.ndarray, cfg: "TrackerConfig", known=None) -> np.
 
 def chained_walls(s: np.ndarray, cfg: "TrackerConfig") -> np.ndarray:
     """(M,) bool: the confident walls among (M, 4) segments, those longer than any vessel
-    alone or as a chain of pieces (see `wall_segments`)."""
+    alone or as a chain of pieces (see `wall_segments`); by the compiled kernel
+    `wall_chains.c` (`chained_walls_numpy` where none can be built)."""
+    if not len(s):
+        return np.zeros(0, bool)
+    lib = chain_kernel()
+    if lib is None:
+        return chained_walls_numpy(s, cfg)
+    return chained_walls_compiled(lib, s, cfg)
+
+
+def chained_walls_numpy(s: np.ndarray, cfg: "TrackerConfig") -> np.ndarray:
+    """`chained_walls`' numpy twin."""
     m = len(s)
     if not m:
         return np.zeros(0, bool)

@@ -87,3 +87,34 @@ def test_find_clusters_compiled_and_numpy_agree(monkeypatch):
     for f in ("centre", "angle", "from_side", "size", "count", "walls"):
         assert np.array_equal(getattr(got, f), getattr(want, f))
     assert all(np.array_equal(a, b) for a, b in zip(got.hulls, want.hulls))
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_chained_walls_match_the_numpy_twin(seed):
+    """Chains of pieces along bends (ends at and about the gap, angles at and about the
+    limit), moored boats' faces, lone long segments: the same walls."""
+    from controller.perception.wall_chains import chain_kernel, chained_walls_compiled
+
+    lib = chain_kernel()
+    if lib is None:
+        pytest.skip("no C compiler: the numpy twin is what runs")
+    rng = np.random.default_rng(80 + seed)
+    cfg = TrackerConfig()
+    rows = []
+    for _ in range(int(rng.integers(1, 5))):  # chains: each piece starts near the last's end
+        p, th = rng.uniform(-50, 50, 2), rng.uniform(-np.pi, np.pi)
+        for _ in range(int(rng.integers(1, 6))):
+            length = rng.uniform(2, 25)
+            gap = rng.choice([0.0, 0.5, cfg.chain_gap_m, rng.uniform(0.8, 1.2)])
+            p = p + gap * np.array([np.cos(th + 1.0), np.sin(th + 1.0)])
+            mid = p + 0.5 * length * np.array([np.cos(th), np.sin(th)])
+            rows.append([*mid, th, length])
+            p = p + length * np.array([np.cos(th), np.sin(th)])
+            th += rng.choice([0.0, np.radians(cfg.chain_angle_deg), rng.uniform(-0.5, 0.5)])
+    rows += [[*rng.uniform(-50, 50, 2), rng.uniform(-4, 4), rng.uniform(1, 60)]
+             for _ in range(int(rng.integers(0, 8)))]
+    s = np.array(rows)[rng.permutation(len(rows))]
+    want = cl.chained_walls_numpy(s, cfg)
+    got = chained_walls_compiled(lib, s, cfg)
+    assert got.dtype == bool and np.array_equal(got, want)
+    assert np.array_equal(cl.chained_walls(s, cfg), want)
