@@ -419,6 +419,12 @@ class _Scene:
     def top_c(self) -> np.ndarray:
         return np.ascontiguousarray(self.top, np.float64)
 
+    @cached_property
+    def at(self) -> dict:
+        """The addresses of the kernels' views (they live as long as the scene)."""
+        return {name: pointer(getattr(self, name)) for name in (
+            "a_c", "b_c", "owner_c", "side_c", "kind_c", "top_c", "profile_key")}
+
     def reach_len(self, reach: float) -> np.ndarray:
         """Per edge: `reach` plus its length (`LidarSimulator._cast`'s test of which edges
         are near), kept for the last `reach` asked."""
@@ -678,7 +684,8 @@ class LidarSimulator:
             self._rows_buf = np.empty(room, np.int64)
             self._offsets_buf = np.empty((2, 2 * room))
         rows, d, p = self._rows_buf, self._offsets_buf, pointer
-        n_rows = lib.lidar_edge_rows(n_e, p(scene.a_c), p(scene.b_c),
+        sat = scene.at
+        n_rows = lib.lidar_edge_rows(n_e, sat["a_c"], sat["b_c"],
                                      p(scene.reach_len(self._reach)), float(centre[0]),
                                      float(centre[1]), n_s, p(origins), d.shape[1] // 2,
                                      p(rows), p(d))
@@ -691,8 +698,8 @@ class LidarSimulator:
             gbin, t = np.empty(room, np.int64), np.empty(room)
             owner, enter = np.empty(room, np.int64), np.empty(room, np.uint8)
             n = lib.lidar_cast(n_rows, n_rows // n_s, p(rows), p(ang), p(ang) + 8 * n_rows,
-                               float(psi), p(scene.a_c), p(scene.b_c), p(scene.owner_c),
-                               p(scene.side_c), p(origins), at["bin_offset"], at["bin_count"],
+                               float(psi), sat["a_c"], sat["b_c"], sat["owner_c"],
+                               sat["side_c"], p(origins), at["bin_offset"], at["bin_count"],
                                at["bin_step"], at["bin_cos"], at["bin_sin"], cp, sp,
                                float(self._reach), room, p(gbin), p(t), p(owner), p(enter))
             if n >= 0:
@@ -739,10 +746,11 @@ class LidarSimulator:
         t_all = np.empty(n, np.float32)
         label = np.empty(n, np.int8)
         at = self._at
+        sat = scene.at
         rc = lib.lidar_profile(
-            self._n_bins, p(first), p(t), p(owner), p(enter), p(scene.kind_c), p(scene.top_c),
-            p(scene.profile_key), at["bin_height"], at["bin_first"], at["tan_el"],
-            at["inv_drop"], at["face_label"], at["top_label"], WATER, p(t_all), p(label))
+            self._n_bins, p(first), p(t), p(owner), p(enter), sat["kind_c"], sat["top_c"],
+            sat["profile_key"], at["bin_height"], at["bin_first"], at["tan_el"], at["inv_drop"],
+            at["face_label"], at["top_label"], WATER, p(t_all), p(label))
         if rc != 0:
             raise MemoryError("lidar: the profile kernel ran out of memory")
         return t_all, label
