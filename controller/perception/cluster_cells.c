@@ -9,18 +9,30 @@
 
 /* The points (m, 2 row-major) in the n x n grid of cells inv_cell^-1 wide with its corner at
  * (-r, -r), less lone returns: those with fewer than two points (themselves included) in
- * the 3 x 3 cells around their own. Writes the kept points, in order, to xy_out with their
- * cells (i, j), and grid (n * n) 1 at their cells, 0 elsewhere. Returns how many are kept,
- * or -1 when out of memory. */
+ * the 3 x 3 cells around their own, and, when `walls` is given, less the points on it (a
+ * wall_n x wall_n grid of cells wall_inv_cell^-1 wide, corner at (-r, -r), each point's
+ * cell clipped into it: clusters.grid_at). Writes the kept points, in order, to xy_out with
+ * their cells (i, j), and grid (n * n) 1 at their cells, 0 elsewhere. Returns how many are
+ * kept, or -1 when out of memory. */
 int64_t sociable_points(int64_t m, const double *xy, double r, double inv_cell, int64_t n,
+                        const uint8_t *walls, int64_t wall_n, double wall_inv_cell,
                         double *xy_out, int64_t *i_out, int64_t *j_out, uint8_t *grid)
 {
+    double wall_top = (double)(wall_n - 1);
     int32_t *count = calloc((size_t)(n * n), sizeof(int32_t));
     if (!count && n > 0)
         return -1;
     memset(grid, 0, (size_t)(n * n));
     int64_t k = 0;
     for (int64_t p = 0; p < m; p++) {
+        if (walls) {
+            double wi = floor((xy[2 * p] + r) * wall_inv_cell);
+            double wj = floor((xy[2 * p + 1] + r) * wall_inv_cell);
+            wi = wi < 0.0 ? 0.0 : (wi > wall_top ? wall_top : wi);
+            wj = wj < 0.0 ? 0.0 : (wj > wall_top ? wall_top : wj);
+            if (walls[(int64_t)wi * wall_n + (int64_t)wj])
+                continue;
+        }
         double fi = floor((xy[2 * p] + r) * inv_cell), fj = floor((xy[2 * p + 1] + r) * inv_cell);
         if (!(fi >= 0.0 && fi < (double)n && fj >= 0.0 && fj < (double)n))
             continue; /* (NaN too) */

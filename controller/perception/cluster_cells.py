@@ -16,19 +16,24 @@ from ..kernels import Kernel, pointer
 _i64, _ptr, _f64 = ctypes.c_int64, ctypes.c_void_p, ctypes.c_double
 
 cluster_kernel = Kernel(Path(__file__).with_name("cluster_cells.c"), {
-    "sociable_points": (_i64, [_i64, _ptr, _f64, _f64, _i64, *[_ptr] * 4]),
+    "sociable_points": (_i64, [_i64, _ptr, _f64, _f64, _i64, _ptr, _i64, _f64, *[_ptr] * 4]),
     "cluster_members": (_i64, [_i64, _ptr, _ptr, _ptr, _i64, _ptr, _i64, _i64, *[_ptr] * 3])})
 """The compiled clustering passes (call it: the library, or None for the numpy versions)."""
 
 
-def sociable_points_compiled(lib, xy: np.ndarray, r: float, cell: float, n: int):
+def sociable_points_compiled(lib, xy: np.ndarray, r: float, cell: float, n: int,
+                             walls=None, wall_cell: float = 1.0):
     """`clusters.sociable_points_numpy` by the kernel: (xy, i, j, grid)."""
     xy = np.ascontiguousarray(xy, np.float64)
     m = len(xy)
     out, i, j = np.empty((m, 2)), np.empty(m, np.int64), np.empty(m, np.int64)
     grid = np.empty((n, n), np.uint8)
-    k = lib.sociable_points(m, pointer(xy), float(r), 1.0 / cell, n, pointer(out), pointer(i),
-                            pointer(j), pointer(grid))
+    if walls is not None:
+        walls = np.ascontiguousarray(walls, np.uint8)
+    k = lib.sociable_points(m, pointer(xy), float(r), 1.0 / cell, n,
+                            None if walls is None else pointer(walls),
+                            0 if walls is None else walls.shape[0], 1.0 / wall_cell,
+                            pointer(out), pointer(i), pointer(j), pointer(grid))
     if k < 0:
         raise MemoryError("clusters: the grid kernel ran out of memory")
     return out[:k], i[:k], j[:k], grid

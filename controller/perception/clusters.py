@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, partial
 
 import numpy as np
 
@@ -230,9 +230,8 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
     lines = wall_lines
     if known_walls is not None and len(known_walls):
         lines = np.concatenate([lines, np.asarray(known_walls)[:, :4]])
-    xy = xy_body
-    if walls.any():
-        xy = xy[~_on_walls(xy, wall_lines, (x0, y0, c, s), cfg)]
+    # The points on this scan's walls are left out with the lone returns (below).
+    wall_mask = _wall_mask(wall_lines, (x0, y0, c, s), cfg) if walls.any() else None
     wall_points = _NO_POINTS
     if collect_wall_points and len(segments):
         confident = chained_walls(np.asarray(segments, float).reshape(-1, 4), cfg)
@@ -242,10 +241,8 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
     r = det.range_m
     n = int(math.ceil(2 * r / cfg.cell_m))
     lib = cluster_kernel()
-    if lib is not None:
-        xy, i, j, grid = sociable_points_compiled(lib, xy, r, cfg.cell_m, n)
-    else:
-        xy, i, j, grid = sociable_points_numpy(xy, r, cfg.cell_m, n)
+    sociable = sociable_points_numpy if lib is None else partial(sociable_points_compiled, lib)
+    xy, i, j, grid = sociable(xy_body, r, cfg.cell_m, n, wall_mask, cfg.wall_cell_m)
     grid = cv2.dilate(grid, np.ones((3, 3), np.uint8))
     n_labels, labels = cv2.connectedComponents(grid, connectivity=8)
     # Pieces of one face that the detector's segment runs through are one cluster (a hull
@@ -324,13 +321,17 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
                     *_viewpoints(cfg, hull_returns), wall_points)
 
 
-def sociable_points_numpy(xy: np.ndarray, r: float, cell: float, n: int):
+def sociable_points_numpy(xy: np.ndarray, r: float, cell: float, n: int, walls=None,
+                          wall_cell: float = 1.0):
     """The points (N, 2) in the (n, n) grid of `cell` with its corner at (-r, -r), less the
     lone returns (no other within a cell or so: a ray through a gap, speckle, which would
-    stretch the box of the cluster it joins by metres): (the kept points, their cells i and
-    j, the uint8 grid with 1 at their cells). The numpy twin of the kernel
-    `cluster_cells.c` (`sociable_points`)."""
+    stretch the box of the cluster it joins by metres) and, if given, those on the `walls`
+    grid (`_wall_mask`, cells of `wall_cell`): (the kept points, their cells i and j, the
+    uint8 grid with 1 at their cells). The numpy twin of the kernel `cluster_cells.c`
+    (`sociable_points`)."""
     cv2 = opencv.cv2()
+    if walls is not None:
+        xy = xy[~grid_at_numpy(walls, xy, r, wall_cell)]
     i = np.floor((xy[:, 0] + r) * (1.0 / cell)).astype(np.intp)
     j = np.floor((xy[:, 1] + r) * (1.0 / cell)).astype(np.intp)
     inside = (i >= 0) & (i < n) & (j >= 0) & (j < n)
@@ -484,7 +485,14 @@ def _on_walls(xy: np.ndarray, walls: np.ndarray, frame, cfg: "TrackerConfig") ->
     """(N,) bool: the body-frame points within about `wall_margin_m` of the wall segments
     (inertial) or of their lines up to `wall_extend_m` beyond their ends (where the fit
     stopped short of the wall's last returns, next to a moored boat's end face), drawn as
-    thick lines into a grid of `wall_cell_m` (no (N, M) distance table)."""
+    thick lines into a grid of `wall_cell_m` (`_wall_mask`; no (N, M) distance table)."""
+    return grid_at(_wall_mask(walls, frame, cfg), xy, cfg.detection.range_m, cfg.wall_cell_m)
+
+
+def _wall_mask(walls: np.ndarray, frame, cfg: "TrackerConfig") -> np.ndarray:
+    """The (n, n) uint8 grid of `wall_cell_m` (corner at (-range, -range), body frame) with
+    the wall segments (inertial) drawn in as lines `wall_margin_m` thick on either side and
+    `wall_extend_m` longer at each end (see `_on_walls`)."""
     cv2 = opencv.cv2()
     x0, y0, c, s = frame
     r = cfg.detection.range_m
@@ -503,7 +511,7 @@ def _on_walls(xy: np.ndarray, walls: np.ndarray, frame, cfg: "TrackerConfig") ->
     for k in range(m):
         cv2.line(mask, tuple(px[k].tolist()), tuple(px[k + m].tolist()), 1, thick,
                  cv2.LINE_8, 4)
-    return grid_at(mask, xy, r, cell)
+    return mask
 
 
 def grid_at(grid: np.ndarray, xy: np.ndarray, r: float, cell: float) -> np.ndarray:

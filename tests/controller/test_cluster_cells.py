@@ -1,6 +1,8 @@
 """The compiled clustering grid of the tracker (`cluster_cells.c`) against its numpy twins
 (issue 33): the same points, cells, grid, counts and members, exactly."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -32,13 +34,21 @@ def _points(seed: int, r: float) -> np.ndarray:
 
 @pytest.mark.parametrize("seed", range(8))
 def test_sociable_points_match_the_numpy_twin(lib, seed):
+    """Without and with a wall grid (random lines drawn as find_clusters draws them)."""
     r, cell = 30.0, 0.5
     n = int(np.ceil(2 * r / cell))
     xy = _points(seed, r)
-    got = sociable_points_compiled(lib, xy, r, cell, n)
-    want = cl.sociable_points_numpy(xy, r, cell, n)
-    for a, b in zip(got, want):
-        assert a.shape == b.shape and np.array_equal(a, b)
+    rng = np.random.default_rng(20 + seed)
+    cfg = TrackerConfig(detection=dataclasses.replace(TrackerConfig().detection, range_m=r))
+    walls = np.column_stack([xy[rng.integers(0, len(xy), 3)], rng.uniform(-3, 3, 3),
+                             rng.uniform(5, 40, 3)])  # through some of the points
+    mask = cl._wall_mask(walls, (0.0, 0.0, 1.0, 0.0), cfg)
+    for grid, wall_cell in ((None, 1.0), (mask, cfg.wall_cell_m)):
+        got = sociable_points_compiled(lib, xy, r, cell, n, grid, wall_cell)
+        want = cl.sociable_points_numpy(xy, r, cell, n, grid, wall_cell)
+        for a, b in zip(got, want):
+            assert a.shape == b.shape and np.array_equal(a, b)
+    assert len(got[0]) < len(sociable_points_compiled(lib, xy, r, cell, n)[0])
 
 
 @pytest.mark.parametrize("seed", range(8))
