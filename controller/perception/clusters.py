@@ -24,13 +24,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, partial
 
 import numpy as np
 
 from . import opencv
 from ..kernels import pointer
 from .cloud_crop import occupancy_kernel
+from .cluster_cells import cluster_kernel, cluster_members_compiled, sociable_points_compiled
+from .wall_chains import chain_kernel, chained_walls_compiled
 from .wall_cells import fraction_on
 
 # `cfg` below is a `tracking.TrackerConfig` (it holds the thresholds); not imported, so that
@@ -124,7 +126,18 @@ def wall_segments(segments: np.ndarray, cfg: "TrackerConfig", known=None) -> np.
 
 def chained_walls(s: np.ndarray, cfg: "TrackerConfig") -> np.ndarray:
     """(M,) bool: the confident walls among (M, 4) segments, those longer than any vessel
-    alone or as a chain of pieces (see `wall_segments`)."""
+    alone or as a chain of pieces (see `wall_segments`); by the compiled kernel
+    `wall_chains.c` (`chained_walls_numpy` where none can be built)."""
+    if not len(s):
+        return np.zeros(0, bool)
+    lib = chain_kernel()
+    if lib is None:
+        return chained_walls_numpy(s, cfg)
+    return chained_walls_compiled(lib, s, cfg)
+
+
+def chained_walls_numpy(s: np.ndarray, cfg: "TrackerConfig") -> np.ndarray:
+    """`chained_walls`' numpy twin."""
     m = len(s)
     if not m:
         return np.zeros(0, bool)
@@ -217,9 +230,8 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
     lines = wall_lines
     if known_walls is not None and len(known_walls):
         lines = np.concatenate([lines, np.asarray(known_walls)[:, :4]])
-    xy = xy_body
-    if walls.any():
-        xy = xy[~_on_walls(xy, wall_lines, (x0, y0, c, s), cfg)]
+    # The points on this scan's walls are left out with the lone returns (below).
+    wall_mask = _wall_mask(wall_lines, (x0, y0, c, s), cfg) if walls.any() else None
     wall_points = _NO_POINTS
     if collect_wall_points and len(segments):
         confident = chained_walls(np.asarray(segments, float).reshape(-1, 4), cfg)
@@ -228,25 +240,16 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
             wall_points = on @ np.array([[c, s], [-s, c]]) + (x0, y0)
     r = det.range_m
     n = int(math.ceil(2 * r / cfg.cell_m))
-    i = np.floor((xy[:, 0] + r) * (1.0 / cfg.cell_m)).astype(np.intp)
-    j = np.floor((xy[:, 1] + r) * (1.0 / cfg.cell_m)).astype(np.intp)
-    inside = (i >= 0) & (i < n) & (j >= 0) & (j < n)
-    xy, i, j = xy[inside], i[inside], j[inside]
-    # A lone return (no other within a cell or so: a ray through a gap, speckle) would
-    # stretch the box of the cluster it joins by metres: drop it.
-    flat = i * n + j
-    count = np.bincount(flat, minlength=n * n).reshape(n, n).astype(np.float32)
-    company = cv2.boxFilter(count, -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
-    social = company[i, j] >= 2
-    xy, i, j = xy[social], i[social], j[social]
-    grid = np.zeros((n, n), np.uint8)
-    grid[i, j] = 1
+    lib = cluster_kernel()
+    sociable = sociable_points_numpy if lib is None else partial(sociable_points_compiled, lib)
+    xy, i, j, grid = sociable(xy_body, r, cfg.cell_m, n, wall_mask, cfg.wall_cell_m)
     grid = cv2.dilate(grid, np.ones((3, 3), np.uint8))
     n_labels, labels = cv2.connectedComponents(grid, connectivity=8)
     # Pieces of one face that the detector's segment runs through are one cluster (a hull
     # side seen at a glancing angle falls apart between the beams' rings).
     others = segments[~walls]
     comp, seg = _face_pairs(others, labels, (x0, y0, c, s), cfg)
+    labels_cv, root = labels, None
     if len(comp) > 1:
         root = np.arange(n_labels)
         first_comp = {}
@@ -264,13 +267,11 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
     for k, m in zip(comp.tolist(), seg.tolist()):
         face_of.setdefault(k, set()).add(m)
     face_of = {k: ends[sorted(v)] for k, v in face_of.items()}
-    point_label = labels[i, j]
-    count = np.bincount(point_label, minlength=n_labels)
-    count[0] = 0  # background (no point has it)
-    good = np.flatnonzero(count >= cfg.min_points)
-    kept = np.flatnonzero(count[point_label] >= cfg.min_points)  # (sort only these)
-    order = kept[np.argsort(point_label[kept], kind="stable")]
-    first = np.searchsorted(point_label[order], good)
+    if lib is not None:
+        count, good, order, first = cluster_members_compiled(lib, i, j, labels_cv, root, n_labels,
+                                                             cfg.min_points)
+    else:
+        count, good, order, first = cluster_members_numpy(i, j, labels, n_labels, cfg.min_points)
     side_angle = _side_angles(segments[~walls], labels, n_labels, (x0, y0, c, s, psi), cfg)
     frame = (x0, y0, c, s, psi)
     centre, angle, size, counts, hulls, edges, from_side, faces = [], [], [], [], [], [], [], []
@@ -318,6 +319,48 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
                     np.asarray(counts, int), hulls, tuple(edges), walls,
                     xy_body if occluders is None else occluders, (x0, y0, psi), tuple(faces),
                     *_viewpoints(cfg, hull_returns), wall_points)
+
+
+def sociable_points_numpy(xy: np.ndarray, r: float, cell: float, n: int, walls=None,
+                          wall_cell: float = 1.0):
+    """The points (N, 2) in the (n, n) grid of `cell` with its corner at (-r, -r), less the
+    lone returns (no other within a cell or so: a ray through a gap, speckle, which would
+    stretch the box of the cluster it joins by metres) and, if given, those on the `walls`
+    grid (`_wall_mask`, cells of `wall_cell`): (the kept points, their cells i and j, the
+    uint8 grid with 1 at their cells). The numpy twin of the kernel `cluster_cells.c`
+    (`sociable_points`)."""
+    cv2 = opencv.cv2()
+    if walls is not None:
+        xy = xy[~grid_at_numpy(walls, xy, r, wall_cell)]
+    i = np.floor((xy[:, 0] + r) * (1.0 / cell)).astype(np.intp)
+    j = np.floor((xy[:, 1] + r) * (1.0 / cell)).astype(np.intp)
+    inside = (i >= 0) & (i < n) & (j >= 0) & (j < n)
+    xy, i, j = xy[inside], i[inside], j[inside]
+    flat = i * n + j
+    count = np.bincount(flat, minlength=n * n).reshape(n, n).astype(np.float32)
+    company = cv2.boxFilter(count, -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
+    social = company[i, j] >= 2
+    xy, i, j = xy[social], i[social], j[social]
+    grid = np.zeros((n, n), np.uint8)
+    grid[i, j] = 1
+    return xy, i, j, grid
+
+
+def cluster_members_numpy(i: np.ndarray, j: np.ndarray, labels: np.ndarray, n_labels: int,
+                          min_points: int):
+    """The members of each component (`labels` (n, n), 0 the background) among the points
+    at cells (i, j): (points per label, the labels with at least `min_points`, the indices
+    of those labels' points grouped by label in ascending order and each group in the
+    points' order, where each such label's group starts). The numpy twin of the kernel
+    `cluster_cells.c` (`cluster_members`)."""
+    point_label = labels[i, j]
+    count = np.bincount(point_label, minlength=n_labels)
+    count[0] = 0  # background (no point has it)
+    good = np.flatnonzero(count >= min_points)
+    kept = np.flatnonzero(count[point_label] >= min_points)  # (sort only these)
+    order = kept[np.argsort(point_label[kept], kind="stable")]
+    first = np.searchsorted(point_label[order], good)
+    return count, good, order, first
 
 
 def behind_a_wall_end(xy: np.ndarray, axis: np.ndarray, sensor, walls: np.ndarray,
@@ -442,7 +485,14 @@ def _on_walls(xy: np.ndarray, walls: np.ndarray, frame, cfg: "TrackerConfig") ->
     """(N,) bool: the body-frame points within about `wall_margin_m` of the wall segments
     (inertial) or of their lines up to `wall_extend_m` beyond their ends (where the fit
     stopped short of the wall's last returns, next to a moored boat's end face), drawn as
-    thick lines into a grid of `wall_cell_m` (no (N, M) distance table)."""
+    thick lines into a grid of `wall_cell_m` (`_wall_mask`; no (N, M) distance table)."""
+    return grid_at(_wall_mask(walls, frame, cfg), xy, cfg.detection.range_m, cfg.wall_cell_m)
+
+
+def _wall_mask(walls: np.ndarray, frame, cfg: "TrackerConfig") -> np.ndarray:
+    """The (n, n) uint8 grid of `wall_cell_m` (corner at (-range, -range), body frame) with
+    the wall segments (inertial) drawn in as lines `wall_margin_m` thick on either side and
+    `wall_extend_m` longer at each end (see `_on_walls`)."""
     cv2 = opencv.cv2()
     x0, y0, c, s = frame
     r = cfg.detection.range_m
@@ -461,7 +511,7 @@ def _on_walls(xy: np.ndarray, walls: np.ndarray, frame, cfg: "TrackerConfig") ->
     for k in range(m):
         cv2.line(mask, tuple(px[k].tolist()), tuple(px[k + m].tolist()), 1, thick,
                  cv2.LINE_8, 4)
-    return grid_at(mask, xy, r, cell)
+    return mask
 
 
 def grid_at(grid: np.ndarray, xy: np.ndarray, r: float, cell: float) -> np.ndarray:

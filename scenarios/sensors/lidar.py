@@ -355,7 +355,11 @@ _SOLID_BITS = 24  # a profile key: float32 height as ordered int << 24 | (solid 
 _i64, _ptr, _f64 = ctypes.c_int64, ctypes.c_void_p, ctypes.c_double
 _profile_kernel = Kernel(Path(__file__).with_name("lidar_profile.c"), {
     "lidar_profile": (ctypes.c_int, [_i64] + [_ptr] * 13 + [ctypes.c_int8] + [_ptr] * 2),
-    "lidar_cast": (_i64, [_i64] + [_ptr] * 13 + [_f64] * 3 + [_ptr] * 4),
+    "lidar_edge_rows": (_i64, [_i64, _ptr, _ptr, _ptr, _f64, _f64, _i64, _ptr, _i64, _ptr,
+                               _ptr]),
+    "lidar_cast": (_i64, [_i64, _i64, _ptr, _ptr, _ptr, _f64] + [_ptr] * 10
+                   + [_f64] * 3 + [_i64] + [_ptr] * 4),
+    "lidar_columns": (ctypes.c_int, [_i64] + [_ptr] * 4 + [_i64, _f64] + [_ptr] * 4),
     "lidar_in_range": (_i64, [_i64] + [_ptr] * 4),
     "lidar_keep": (_i64, [_i64, _ptr, _ptr, _ptr, ctypes.c_int, ctypes.c_int, ctypes.c_int8,
                           _ptr, _ptr]),
@@ -414,6 +418,21 @@ class _Scene:
     @cached_property
     def top_c(self) -> np.ndarray:
         return np.ascontiguousarray(self.top, np.float64)
+
+    @cached_property
+    def at(self) -> dict:
+        """The addresses of the kernels' views (they live as long as the scene)."""
+        return {name: pointer(getattr(self, name)) for name in (
+            "a_c", "b_c", "owner_c", "side_c", "kind_c", "top_c", "profile_key")}
+
+    def reach_len(self, reach: float) -> np.ndarray:
+        """Per edge: `reach` plus its length (`LidarSimulator._cast`'s test of which edges
+        are near), kept for the last `reach` asked."""
+        cached = self.__dict__.get("_reach_len")
+        if cached is None or cached[0] != reach:
+            cached = (reach, np.ascontiguousarray(reach + np.hypot(*(self.b - self.a).T)))
+            self.__dict__["_reach_len"] = cached
+        return cached[1]
 
     @cached_property
     def profile_key(self) -> np.ndarray:
@@ -484,9 +503,13 @@ class LidarSimulator:
         local = np.arange(counts.sum()) - np.repeat(self._bin_offset, counts)
         self._bin_cos = np.cos(local * np.repeat(self._bin_step, counts))
         self._bin_sin = np.sin(local * np.repeat(self._bin_step, counts))
+        self._rows_buf = np.empty(0, np.int64)  # the compiled cast's scratch, grown as needed
+        self._offsets_buf = np.empty((2, 0))
+        self._cast_room = 1 << 14  # its room for crossings, grown as needed
         b = self._beams  # addresses of the fixed tables the kernels read (they live as long)
         self._at = {name: arr.ctypes.data for name, arr in (
             ("bin_offset", self._bin_offset64), ("bin_count", self._bin_count64),
+            ("bin_step", self._bin_step),
             ("bin_cos", self._bin_cos), ("bin_sin", self._bin_sin),
             ("bin_height", self._bin_height), ("bin_first", self._bin_first64),
             ("tan_el", b.tan_el), ("inv_drop", b.inv_drop), ("min_h", b.min_h),
@@ -604,6 +627,9 @@ class LidarSimulator:
         way a ray crosses is the sign of its cross product with the edge, against the side
         the solid lies on.
         """
+        lib = _profile_kernel() if self.compiled else None
+        if lib is not None:
+            return self._cast_compiled(lib, scene, origins, psi)
         a, b = scene.a, scene.b
         reach = self._reach
         centre = origins.mean(axis=0)
@@ -629,21 +655,6 @@ class LidarSimulator:
         turns = np.rint((lo + np.abs(span) - hi) / (2 * np.pi)).astype(np.int64)
         k1 = np.floor(hi / step).astype(np.int64) + turns * self._bin_count[sensor]
         count = np.maximum(k1 - k0 + 1, 0)
-        lib = _profile_kernel() if self.compiled else None
-        if lib is not None:  # the crossings bin by bin, compiled (the same arithmetic)
-            total = int(count.sum())
-            gbin, t = np.empty(total, np.int64), np.empty(total)
-            owner, enter = np.empty(total, np.int64), np.empty(total, np.uint8)
-            p, at = pointer, self._at
-            sensor = np.ascontiguousarray(sensor, np.int64)
-            n = lib.lidar_cast(len(edge), p(k0), p(count), p(edge), p(sensor), p(scene.a_c),
-                               p(scene.b_c), p(scene.owner_c), p(scene.side_c),
-                               p(np.ascontiguousarray(origins, float)), at["bin_offset"],
-                               at["bin_count"], at["bin_cos"], at["bin_sin"],
-                               math.cos(psi), math.sin(psi), float(reach), p(gbin), p(t),
-                               p(owner), p(enter))
-            return gbin[:n], t[:n], owner[:n], enter[:n].view(bool)
-        count = np.maximum(k1 - k0 + 1, 0)
         row = np.repeat(np.arange(len(edge)), count)
         k = np.repeat(k0 - (np.cumsum(count) - count), count) + np.arange(int(count.sum()))
         s = sensor[row]
@@ -661,6 +672,39 @@ class LidarSimulator:
         # The solid lies on side +1 (right of a -> b) or -1: the ray enters it where the
         # ray's cross product with the edge (den) has the opposite sign.
         return gbin, t, scene.owner[e], scene.side[e] * den < 0.0
+
+    def _cast_compiled(self, lib, scene: _Scene, origins, psi):
+        """`_cast` by the kernels of `lidar_profile.c`, bit for bit the same: the near edges'
+        rows (and their ends' offsets), numpy's arctan2 of those, then the crossings."""
+        centre = origins.mean(axis=0)
+        origins = np.ascontiguousarray(origins, float)
+        n_e, n_s = len(scene.a), len(origins)
+        room = n_e * n_s
+        if len(self._rows_buf) < room:
+            self._rows_buf = np.empty(room, np.int64)
+            self._offsets_buf = np.empty((2, 2 * room))
+        rows, d, p = self._rows_buf, self._offsets_buf, pointer
+        sat = scene.at
+        n_rows = lib.lidar_edge_rows(n_e, sat["a_c"], sat["b_c"],
+                                     p(scene.reach_len(self._reach)), float(centre[0]),
+                                     float(centre[1]), n_s, p(origins), d.shape[1] // 2,
+                                     p(rows), p(d))
+        if n_rows <= 0:
+            return np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64), np.zeros(0, bool)
+        ang = np.arctan2(d[0, :2 * n_rows], d[1, :2 * n_rows])
+        at, cp, sp = self._at, math.cos(psi), math.sin(psi)
+        while True:
+            room = self._cast_room
+            gbin, t = np.empty(room, np.int64), np.empty(room)
+            owner, enter = np.empty(room, np.int64), np.empty(room, np.uint8)
+            n = lib.lidar_cast(n_rows, n_rows // n_s, p(rows), p(ang), p(ang) + 8 * n_rows,
+                               float(psi), sat["a_c"], sat["b_c"], sat["owner_c"],
+                               sat["side_c"], p(origins), at["bin_offset"], at["bin_count"],
+                               at["bin_step"], at["bin_cos"], at["bin_sin"], cp, sp,
+                               float(self._reach), room, p(gbin), p(t), p(owner), p(enter))
+            if n >= 0:
+                return gbin[:n], t[:n], owner[:n], enter[:n].view(bool)
+            self._cast_room = 2 * (-n - 1)
 
     def _distances(self, scene: _Scene, gbin, t, owner, enter):
         """Every world-facing beam's horizontal distance to the first surface it meets
@@ -687,20 +731,26 @@ class LidarSimulator:
         lib = _profile_kernel() if self.compiled else None
         if lib is None:
             return self._profile_numpy(scene, gbin, t, owner, enter)
-        order = np.argsort(gbin * self._t_scale + t, kind="stable")
-        t = np.ascontiguousarray(t[order], np.float64)
-        owner = np.ascontiguousarray(owner[order], np.int64)
-        enter = np.ascontiguousarray(enter[order], np.uint8)
-        first = np.zeros(self._n_bins + 1, np.int64)
-        np.cumsum(np.bincount(gbin, minlength=self._n_bins), out=first[1:])
+        m = len(t)
+        gbin = np.ascontiguousarray(gbin, np.int64)
+        t_in = np.ascontiguousarray(t, np.float64)
+        owner_in = np.ascontiguousarray(owner, np.int64)
+        enter_in = np.ascontiguousarray(enter).view(np.uint8)
+        t, owner, enter = np.empty(m), np.empty(m, np.int64), np.empty(m, np.uint8)
+        first = np.empty(self._n_bins + 1, np.int64)
+        p = pointer
+        if lib.lidar_columns(m, p(gbin), p(t_in), p(owner_in), p(enter_in), self._n_bins,
+                             float(self._t_scale), p(first), p(t), p(owner), p(enter)):
+            raise MemoryError("lidar: the column sort ran out of memory")
         n = len(self._keys)
         t_all = np.empty(n, np.float32)
         label = np.empty(n, np.int8)
-        p, at = pointer, self._at
+        at = self._at
+        sat = scene.at
         rc = lib.lidar_profile(
-            self._n_bins, p(first), p(t), p(owner), p(enter), p(scene.kind_c), p(scene.top_c),
-            p(scene.profile_key), at["bin_height"], at["bin_first"], at["tan_el"],
-            at["inv_drop"], at["face_label"], at["top_label"], WATER, p(t_all), p(label))
+            self._n_bins, p(first), p(t), p(owner), p(enter), sat["kind_c"], sat["top_c"],
+            sat["profile_key"], at["bin_height"], at["bin_first"], at["tan_el"], at["inv_drop"],
+            at["face_label"], at["top_label"], WATER, p(t_all), p(label))
         if rc != 0:
             raise MemoryError("lidar: the profile kernel ran out of memory")
         return t_all, label

@@ -3,7 +3,11 @@
  * the crossings sorted by distance cut the ray into segments; the highest solid present on
  * each gives the profile; beams, sorted by tan(elevation) within a column, then fall into
  * runs (face of segment i, top of segment i, ..., sky) by the same float32 thresholds as the
- * numpy version, so the two agree bit for bit. */
+ * numpy version, so the two agree bit for bit. Beside it, the scan's other per-beam and
+ * per-crossing passes (the 2-D cast, the crossings' order by column, the returns), each the
+ * twin of a numpy method there; C because each replaces a few dozen numpy calls per scan
+ * (see controller/kernels). Only arctan2 stays with numpy, whose SIMD version rounds
+ * differently from libm's. */
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -164,28 +168,108 @@ int lidar_profile(int64_t n_cols, const int64_t *first, const double *t, const i
     return 0;
 }
 
-/* The 2-D cast's crossings (LidarSimulator._cast): row r pairs edge row_edge[r] with the
- * bins k0[r] .. k0[r] + count[r] - 1 of sensor row_sensor[r] (bins wrap modulo the sensor's
- * count). For each, the crossing of the bin's ray from the sensor's origin (heading: cos
- * cp, sin sp) with the edge a -> b, kept when 1e-6 < t <= reach; written in row and bin
- * order: the bin (numbered across sensors), distance, solid, and whether the ray enters
- * it. Returns how many were written. */
-int64_t lidar_cast(int64_t n_rows, const int64_t *k0, const int64_t *count,
-                   const int64_t *row_edge, const int64_t *row_sensor, const double *a,
-                   const double *b, const int64_t *edge_owner, const double *edge_side,
-                   const double *origins, const int64_t *bin_offset, const int64_t *bin_count,
-                   const double *bin_cos, const double *bin_sin, double cp, double sp,
-                   double reach, int64_t *gbin, double *t, int64_t *owner, uint8_t *enter)
+/* The 2-D cast, first part (LidarSimulator._cast): the edges near enough to matter
+ * (min(|a - centre|, |b - centre|) < reach + length, with hypot as numpy's), one row per
+ * (sensor, such edge), sensors outermost: the row's edge, and for the caller's arctan2 the
+ * offsets from the sensor of the edge's ends: with N rows, dy of end a in d[0 .. N), of
+ * end b in d[N .. 2N), and dx likewise from d + 2 room. Returns N, or -1 when more than
+ * `room`. */
+int64_t lidar_edge_rows(int64_t n_edges, const double *a, const double *b,
+                        const double *reach_len, double cx, double cy, int64_t n_sensors,
+                        const double *origins, int64_t room, int64_t *row_edge, double *d)
 {
     int64_t n = 0;
+    for (int64_t e = 0; e < n_edges; e++) {
+        double r = reach_len[e];
+        double ax = a[2 * e] - cx, ay = a[2 * e + 1] - cy;
+        double bx = b[2 * e] - cx, by = b[2 * e + 1] - cy;
+        /* hypot only near the threshold: elsewhere the squares decide (hypot is within
+         * an ulp, far inside the margin) */
+        double qa = ax * ax + ay * ay, qb = bx * bx + by * by, q = qa < qb ? qa : qb;
+        double r2 = r * r;
+        int near;
+        if (q < r2 * (1.0 - 1e-9))
+            near = 1;
+        else if (q > r2 * (1.0 + 1e-9))
+            near = 0;
+        else {
+            double ha = hypot(ax, ay), hb = hypot(bx, by);
+            near = (ha < hb ? ha : hb) < r;
+        }
+        if (near)
+            row_edge[n++] = e;
+    }
+    if (n * n_sensors > room)
+        return -1;
+    for (int64_t s = 1; s < n_sensors; s++)
+        for (int64_t i = 0; i < n; i++)
+            row_edge[s * n + i] = row_edge[i];
+    int64_t rows = n * n_sensors;
+    for (int64_t s = 0; s < n_sensors; s++) {
+        double ox = origins[2 * s], oy = origins[2 * s + 1];
+        for (int64_t i = 0; i < n; i++) {
+            int64_t e = row_edge[i], r = s * n + i;
+            d[r] = a[2 * e + 1] - oy;
+            d[rows + r] = b[2 * e + 1] - oy;
+            d[2 * room + r] = a[2 * e] - ox;
+            d[2 * room + rows + r] = b[2 * e] - ox;
+        }
+    }
+    return rows;
+}
+
+/* numpy's float remainder (the sign of the divisor). */
+static double py_mod(double x, double m)
+{
+    double r = fmod(x, m);
+    if (r != 0.0) {
+        if ((m < 0) != (r < 0))
+            r += m;
+    } else {
+        r = copysign(0.0, m);
+    }
+    return r;
+}
+
+/* Second part: the crossings. Row r (of n_rows, sensor r / rows_per_sensor) pairs edge
+ * row_edge[r] with the bins between its ends' angles ang_a[r] - psi, ang_b[r] - psi (each
+ * end's bin from its own angle, and whole turns, so two legs meeting at a vertex agree);
+ * bins wrap modulo the sensor's count. For each, the crossing of the bin's ray from the
+ * sensor's origin (heading: cos cp, sin sp) with the edge a -> b, kept when
+ * 1e-6 < t <= reach; written in row and bin order: the bin (numbered across sensors),
+ * distance, solid, and whether the ray enters it. Returns how many were written, or
+ * -(how many there are) - 1 when more than `room` (nothing useful written then). */
+int64_t lidar_cast(int64_t n_rows, int64_t rows_per_sensor, const int64_t *row_edge,
+                   const double *ang_a, const double *ang_b, double psi, const double *a,
+                   const double *b, const int64_t *edge_owner, const double *edge_side,
+                   const double *origins, const int64_t *bin_offset, const int64_t *bin_count,
+                   const double *bin_step, const double *bin_cos, const double *bin_sin,
+                   double cp, double sp, double reach, int64_t room, int64_t *gbin, double *t,
+                   int64_t *owner, uint8_t *enter)
+{
+    const double pi = 3.141592653589793, two_pi = 6.283185307179586;
+    int64_t n = 0, need = 0;
     for (int64_t r = 0; r < n_rows; r++) {
-        int64_t e = row_edge[r], s = row_sensor[r], nb = bin_count[s];
+        int64_t e = row_edge[r], s = r / rows_per_sensor, nb = bin_count[s];
+        double step = bin_step[s];
+        double aa = ang_a[r] - psi, ab = ang_b[r] - psi;
+        double span = py_mod(ab - aa + pi, two_pi) - pi;
+        double lo = span < 0 ? ab : aa, hi = span < 0 ? aa : ab;
+        int64_t k0 = (int64_t)ceil(lo / step);
+        int64_t turns = (int64_t)nearbyint((lo + fabs(span) - hi) / two_pi);
+        int64_t k1 = (int64_t)floor(hi / step) + turns * nb;
+        int64_t count = k1 - k0 + 1;
+        if (count <= 0)
+            continue;
+        need += count;
+        if (need > room)
+            continue;
         double ax = a[2 * e], ay = a[2 * e + 1];
         double ex = b[2 * e] - ax, ey = b[2 * e + 1] - ay;
         double rx = ax - origins[2 * s], ry = ay - origins[2 * s + 1];
         double num = rx * ey - ry * ex;
-        for (int64_t j = 0; j < count[r]; j++) {
-            int64_t k = k0[r] + j, m = k % nb;
+        for (int64_t j = 0; j < count; j++) {
+            int64_t k = k0 + j, m = k % nb;
             if (m < 0)
                 m += nb;
             int64_t g = bin_offset[s] + m;
@@ -202,7 +286,54 @@ int64_t lidar_cast(int64_t n_rows, const int64_t *k0, const int64_t *count,
             }
         }
     }
-    return n;
+    return need > room ? -need - 1 : n;
+}
+
+/* Third part: the crossings by column, for lidar_profile: ordered as numpy's stable
+ * argsort of gbin * t_scale + t (that rounded key; ties in the given order), into t_out,
+ * owner_out, enter_out, with first[c] .. first[c + 1] the crossings of column c. Returns
+ * 0, or -1 when out of memory. */
+int lidar_columns(int64_t n, const int64_t *gbin, const double *t, const int64_t *owner,
+                  const uint8_t *enter, int64_t n_bins, double t_scale, int64_t *first,
+                  double *t_out, int64_t *owner_out, uint8_t *enter_out)
+{
+    int64_t *at = malloc(sizeof(int64_t) * (n_bins + 1));
+    if (!at)
+        return -1;
+    for (int64_t c = 0; c <= n_bins; c++)
+        first[c] = 0;
+    for (int64_t i = 0; i < n; i++)
+        first[gbin[i] + 1]++;
+    for (int64_t c = 0; c < n_bins; c++)
+        first[c + 1] += first[c];
+    for (int64_t c = 0; c < n_bins; c++)
+        at[c] = first[c];
+    for (int64_t i = 0; i < n; i++) {
+        int64_t j = at[gbin[i]]++;
+        t_out[j] = t[i];
+        owner_out[j] = owner[i];
+        enter_out[j] = enter[i];
+    }
+    free(at);
+    for (int64_t c = 0; c < n_bins; c++) { /* within a column, a stable insertion sort */
+        double base = (double)c * t_scale;
+        for (int64_t i = first[c] + 1; i < first[c + 1]; i++) {
+            double tv = t_out[i], kv = base + tv;
+            int64_t ov = owner_out[i];
+            uint8_t ev = enter_out[i];
+            int64_t j = i - 1;
+            while (j >= first[c] && base + t_out[j] > kv) {
+                t_out[j + 1] = t_out[j];
+                owner_out[j + 1] = owner_out[j];
+                enter_out[j + 1] = enter_out[j];
+                j--;
+            }
+            t_out[j + 1] = tv;
+            owner_out[j + 1] = ov;
+            enter_out[j + 1] = ev;
+        }
+    }
+    return 0;
 }
 
 /* The scan's returns, first part: the beams within range (min_h <= t <= max_h), as

@@ -652,7 +652,7 @@ def test_a_direction_with_nothing_in_it_has_no_returns_but_the_water():
     assert np.allclose(t_all[down], 1.3 / -sim._beams.tan_el[down], rtol=1e-5)
 
 
-# -- the compiled profile kernel against its numpy twin (issue 33) --------------------------
+# -- the compiled cast and profile kernels against their numpy twins (issue 33) --------------------------
 def _random_world(seed):
     """A canal with random walls, piers, moored boats, decks and overhangs, some concave."""
     rng = np.random.default_rng(seed)
@@ -691,6 +691,54 @@ def test_compiled_profile_at_a_vertex_and_under_a_deck_matches_the_twin():
     for pose in [(41.0, 0.0, 0.0), (38.6, 2.0, 0.3), (41.3, -0.7, 2.9), (15.0, 3.0, -0.2)]:
         a, b = first_hits(sim_c, np.array(pose)), first_hits(sim_n, np.array(pose))
         assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_compiled_cast_matches_its_numpy_twin_bit_for_bit(seed):
+    """The 2-D cast's crossings (bin, distance, solid, entering), in the same order: random
+    worlds and poses, headings on a bin's ray and vertices on a sensor's line among them,
+    with too little room for the crossings at first (the kernel asks for more)."""
+    world = _random_world(seed)
+    rng = np.random.default_rng(200 + seed)
+    compiled, twin = (LidarSimulator(world, seed=seed, compiled=c) for c in (True, False))
+    compiled._cast_room = 1
+    poses = [np.array([rng.uniform(-70, 70), rng.uniform(-6, 6), rng.uniform(-np.pi, np.pi)])
+             for _ in range(6)] + [np.array([5.0, 0.0, 0.0]), np.array([11.0, -5.0, np.pi / 2]),
+                                   np.array([0.0, 3.0, compiled._bin_step[0] * 7])]
+    for pose in poses:
+        for extra in ((), (box(pose[0] + 3, pose[0] + 6, pose[1] - 1, pose[1] + 1),)):
+            scene = compiled._scene_at(None, extra)
+            origins = compiled.sensor_positions(pose)
+            a = compiled._cast(scene, origins, pose[2])
+            b = twin._cast(scene, origins, pose[2])
+            for x, y in zip(a, b):
+                assert x.dtype.kind == y.dtype.kind and np.array_equal(x, y)
+
+
+def test_compiled_column_order_is_the_stable_argsort_of_bin_and_distance():
+    """`lidar_columns` orders crossings as numpy's stable argsort of bin * scale + t: equal
+    distances and distances that round to one key keep their order."""
+    from scenarios.sensors.lidar import _profile_kernel
+
+    lib = _profile_kernel()
+    rng = np.random.default_rng(5)
+    n_bins, scale = 300, 256.0
+    for n in (0, 1, 50, 4000):
+        gbin = rng.integers(0, n_bins, n).astype(np.int64)
+        t = rng.uniform(0.0, 130.0, n)
+        t[::3] = np.round(t[::3])  # exact ties
+        t[1::5] = t[::5][:len(t[1::5])] + rng.uniform(0, 1e-11, len(t[1::5]))  # one key
+        owner = np.arange(n, dtype=np.int64)
+        enter = rng.integers(0, 2, n).astype(np.uint8)
+        first = np.empty(n_bins + 1, np.int64)
+        t_out, owner_out, enter_out = np.empty(n), np.empty(n, np.int64), np.empty(n, np.uint8)
+        p = lambda x: x.ctypes.data  # noqa: E731
+        assert lib.lidar_columns(n, p(gbin), p(t), p(owner), p(enter), n_bins, scale, p(first),
+                                 p(t_out), p(owner_out), p(enter_out)) == 0
+        order = np.argsort(gbin * scale + t, kind="stable")
+        assert np.array_equal(owner_out, order) and np.array_equal(t_out, t[order])
+        assert np.array_equal(enter_out, enter[order])
+        assert np.array_equal(first[1:], np.cumsum(np.bincount(gbin, minlength=n_bins)))
 
 
 def test_detect_on_a_simulated_scan_takes_detect_set_and_csv(tmp_path, capsys):
