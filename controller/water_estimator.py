@@ -148,11 +148,11 @@ def usable_current(estimate: WaterEstimate, heading_rad: float, prior_sigma: flo
     second is handed over in full after a window or two, while one window of an autopilot
     EKF's sway noise (correlated over about a second) is no longer steered by as a side
     current of 0.07 m/s at the start. After that the part is used in full (a significance
-    test there held back part of a heading bias's stand-in in bends), so no offset is left. Along the boat a current looks
-    like a drag error and a second's window tells little (sigma ~0.2 m/s after ten windows
-    of an autopilot's EKF): handed over early, the navigation's noise steered the boat as a
-    head current of 0.3 m/s; so that part counts only as it becomes known to `along_sigma`,
-    w = 1 - (sigma / along_sigma)^2. What is not handed over there only changes the speed,
+    test there held back part of a heading bias's stand-in in bends), so no offset is left.
+    Along the boat a current looks like a drag error and a second's window tells little
+    (sigma ~0.2 m/s after ten windows of an autopilot's EKF): handed over early, the
+    navigation's noise steered the boat as a head current of 0.3 m/s; so that part counts
+    only as it becomes known to `along_sigma`, w = 1 - (sigma / along_sigma)^2. What is not handed over there only changes the speed,
     which the NMPC's feedback holds."""
     cov = estimate.current_cov
     if cov is None:

@@ -88,15 +88,18 @@ def _banked(s_open: np.ndarray, side: float, path: WaypointPath, a, b, step_m: f
     return ((s_open[:, None] >= lo[None]) & (s_open[:, None] <= hi[None])).any(axis=1)
 
 
-def blind_speed_cap(distance_m: float, speed_mps: float, decel_mps2: float,
-                    boat_speed_mps: float | None = None) -> float:
+def blind_speed_cap(distance_m: float, speed_mps: float, decel_mps2: float) -> float:
     """The highest speed from which braking at `decel_mps2` comes down to `speed_mps` within
-    `distance_m` (`speed_mps` itself once the distance is used up). With the boat's speed
-    `boat_speed_mps` above that, as much less again (down to half the cap): the NMPC
-    follows a slower reference with a lag (a fuzz case came to a blind side canal at 1.5 m/s
-    for a cap of 1.0 and met the vessel coming out at 0.05 m), so a boat over the cap is
-    asked to brake the harder, and is at the cap by the opening."""
-    cap = math.sqrt(speed_mps * speed_mps + 2.0 * decel_mps2 * max(distance_m, 0.0))
-    if boat_speed_mps is not None and boat_speed_mps > cap:
-        cap = max(2.0 * cap - boat_speed_mps, 0.5 * cap)
-    return cap
+    `distance_m` (`speed_mps` itself once the distance is used up)."""
+    return math.sqrt(speed_mps * speed_mps + 2.0 * decel_mps2 * max(distance_m, 0.0))
+
+
+def ask_below_cap(cap_mps: float, boat_speed_mps: float) -> float:
+    """The speed to ask of a boat going at `boat_speed_mps` under a cap: the cap, or with the
+    boat above it as much less again (down to half the cap). The NMPC follows a slower
+    reference with a lag (a fuzz case came to a blind side canal at 1.5 m/s for a cap of
+    1.0 and met the vessel coming out at 0.05 m), so a boat over the cap is asked to brake
+    the harder, and is at the cap by the opening."""
+    if boat_speed_mps <= cap_mps:
+        return cap_mps
+    return max(2.0 * cap_mps - boat_speed_mps, 0.5 * cap_mps)

@@ -23,7 +23,7 @@ from ..errors import InputError, SolverError, finite_number
 from .problem import NU, NX, NX_BOAT, NmpcConfig, ParamLayout, build_ocp, pack_params
 from .reference import Reference, WaypointPath, reference_trajectory, waypoint_path
 from .rti import QpOptions, QpStep, SqpResult, sqp
-from .blind_openings import blind_opening_ahead, blind_speed_cap
+from .blind_openings import ask_below_cap, blind_opening_ahead, blind_speed_cap
 from .passage import WayAhead
 from .seamanship import Shaping, assess
 from .segment_slots import SLOT_FIELDS, check_segments, select_checked
@@ -566,10 +566,10 @@ class NmpcController:
                                  c.blind_depth_m)
         if at is None:
             return speed, ""
-        distance = at - c.blind_margin_m - s
-        if blind_speed_cap(distance, c.blind_speed_mps, c.stop_decel_mps2) >= speed:
+        cap = blind_speed_cap(at - c.blind_margin_m - s, c.blind_speed_mps, c.stop_decel_mps2)
+        if cap >= speed:
             return speed, ""
-        cap = blind_speed_cap(distance, c.blind_speed_mps, c.stop_decel_mps2, surge_mps)
+        cap = ask_below_cap(cap, surge_mps)
         return cap, f"blind opening {at - s:.0f} m ahead: {cap:.1f} m/s"
 
     def _stop(self, s: float, d: float, x: np.ndarray, segments, elapsed_s: float,

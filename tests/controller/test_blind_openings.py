@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from controller.nmpc.blind_openings import blind_opening_ahead, blind_speed_cap
+from controller.nmpc.blind_openings import (ask_below_cap, blind_opening_ahead,
+                                             blind_speed_cap)
 from controller.nmpc.reference import waypoint_path
 
 PATH = waypoint_path([[0.0, 0.0], [300.0, 0.0]])
@@ -63,10 +64,10 @@ def test_the_speed_cap_brakes_down_to_the_blind_speed():
 def test_a_boat_over_the_cap_is_asked_for_as_much_less_again():
     """The NMPC follows a slower reference with a lag: a boat 0.3 m/s over the cap is asked
     for 0.3 m/s under it, never less than half the cap; at or under the cap, the cap."""
-    assert blind_speed_cap(0.0, 1.0, 0.06, boat_speed_mps=1.3) == pytest.approx(0.7)
-    assert blind_speed_cap(0.0, 1.0, 0.06, boat_speed_mps=2.5) == pytest.approx(0.5)
-    assert blind_speed_cap(25.0, 1.0, 0.06, boat_speed_mps=1.5) == pytest.approx(2.0)
-    assert blind_speed_cap(0.0, 1.0, 0.06, boat_speed_mps=0.8) == 1.0
+    assert ask_below_cap(blind_speed_cap(0.0, 1.0, 0.06), 1.3) == pytest.approx(0.7)
+    assert ask_below_cap(blind_speed_cap(0.0, 1.0, 0.06), 2.5) == pytest.approx(0.5)
+    assert ask_below_cap(blind_speed_cap(25.0, 1.0, 0.06), 1.5) == pytest.approx(2.0)
+    assert ask_below_cap(blind_speed_cap(0.0, 1.0, 0.06), 0.8) == 1.0
 
 
 def test_a_gap_in_the_scanned_quay_is_not_an_opening():
