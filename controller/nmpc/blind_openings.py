@@ -25,8 +25,9 @@ import math
 
 import numpy as np
 
-from ..geometry import segments_cross, segments_to_endpoints
+from ..geometry import segments_to_endpoints
 
+from .path_geometry import rays_crossing
 from .reference import WaypointPath
 
 
@@ -53,7 +54,7 @@ def blind_opening_ahead(path: WaypointPath, progress_m: float, boat_xy, segments
     for side in (1.0, -1.0):
         far = xy + side * depth_m * normal  # (n, 2) the far ends of the side rays
         seen = np.hypot(*(far - boat).T) <= lookahead_m  # beyond, no segment means nothing
-        open_ = ~segments_cross(xy, far, a, b, closed=True).any(axis=1)  # through a
+        open_ = ~rays_crossing(xy, far, a, b, closed=True)  # through a
         # vertex where two walls meet is no way through
         k = np.flatnonzero(seen & open_)
         if not len(k):
@@ -61,7 +62,7 @@ def blind_opening_ahead(path: WaypointPath, progress_m: float, boat_xy, segments
         k = k[_banked(s[k], side, path, a, b, step_m)]  # a side canal, not a missed wall
         if not len(k):
             continue
-        blind = segments_cross(np.broadcast_to(boat, (len(k), 2)), far[k], a, b).any(axis=1)
+        blind = rays_crossing(boat, far[k], a, b)
         if blind.any():
             found.append(float(s[k[np.argmax(blind)]]))
     return min(found) if found else None

@@ -124,10 +124,30 @@ def load_cached(name: str, code: str, load, flags: tuple[str, ...] = DEFAULT_FLA
     return load(path), path, hit, seconds
 
 
+_LOADED: dict = {}  # (id(function), flags, directory) -> (function, CompiledFunction)
+
+
 def compile_cached(function: ca.Function, flags: tuple[str, ...] = DEFAULT_FLAGS,
                    directory: Path | None = None) -> CompiledFunction:
     """`function` as a compiled library from the cache, compiling it first if needed; the
-    interpreted `function` itself, with a warning, when that is impossible."""
+    interpreted `function` itself, with a warning, when that is impossible. A Function
+    already loaded in this process is handed back without generating its C again (the
+    code's hash is the cache's key, and generating it costs ~25 ms a Function)."""
+    directory = directory or cache_dir()
+    key = (id(function), tuple(flags), directory)
+    known = _LOADED.get(key)
+    if known is not None and known[0] is function:
+        return known[1]
+    result = _compile_cached(function, flags, directory)
+    if result.compiled:
+        if len(_LOADED) >= 64:
+            _LOADED.clear()
+        _LOADED[key] = (function, result)  # (the Function kept: its id is not reused)
+    return result
+
+
+def _compile_cached(function: ca.Function, flags: tuple[str, ...],
+                    directory: Path | None) -> CompiledFunction:
     name = function.name()
     try:
         loaded, library, hit, seconds = load_cached(

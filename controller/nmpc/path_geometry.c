@@ -5,7 +5,10 @@
  * path_frame: arc length s and signed offset d (> 0 to starboard) of n points against the
  *   legs of a waypoint path whose extent overlaps [s_min, s_max] (WaypointPath.frame).
  * forced_slack_at: the slack each point's hull circle needs midway between the walls abeam
- *   (slack_reference.forced_slack_at), for M segments (x_c, y_c, theta, length) rows. */
+ *   (slack_reference.forced_slack_at), for M segments (x_c, y_c, theta, length) rows.
+ * rays_crossing: which of n sight lines p -> q cross any of m walls a -> b
+ *   (geometry.segments_cross(...).any(axis=1)), `closed` counting touches too; a p stride
+ *   of 0 casts every line from the one point p. */
 #include <math.h>
 #include <stdint.h>
 
@@ -143,4 +146,25 @@ int64_t forced_slack_at(int64_t n, const double *px, const double *py, const dou
         any = 1;
     }
     return any;
+}
+
+static double cross3(double ox, double oy, double px, double py, double qx, double qy)
+{
+    return (px - ox) * (qy - oy) - (py - oy) * (qx - ox);
+}
+
+void rays_crossing(int64_t n, const double *p, int64_t p_stride, const double *q, int64_t m,
+                   const double *a, const double *b, int closed, uint8_t *out)
+{
+    for (int64_t i = 0; i < n; i++) {
+        double p0 = p[i * p_stride], p1 = p[i * p_stride + 1], q0 = q[2 * i], q1 = q[2 * i + 1];
+        uint8_t hit = 0;
+        for (int64_t j = 0; j < m && !hit; j++) {
+            double a0 = a[2 * j], a1 = a[2 * j + 1], b0 = b[2 * j], b1 = b[2 * j + 1];
+            double d1 = cross3(a0, a1, b0, b1, p0, p1), d2 = cross3(a0, a1, b0, b1, q0, q1);
+            double d3 = cross3(p0, p1, q0, q1, a0, a1), d4 = cross3(p0, p1, q0, q1, b0, b1);
+            hit = closed ? (d1 * d2 <= 0 && d3 * d4 <= 0) : (d1 * d2 < 0 && d3 * d4 < 0);
+        }
+        out[i] = hit;
+    }
 }

@@ -1,19 +1,47 @@
 """The compiled geometry of the NMPC's step (`path_geometry.c`): the path frame of points
-(`WaypointPath.frame`) and the forced slack (`slack_reference.forced_slack_at`), the two
-largest numpy costs of a step's set-up after the QP. Loaded once per process; None where
-nothing can be compiled, and the callers then run their numpy twins."""
+(`WaypointPath.frame`), the forced slack (`slack_reference.forced_slack_at`) and the sight
+lines of the blind-opening rule (`rays_crossing`), the largest numpy costs of a step's set-up
+after the QP. Loaded once per process; None where nothing can be compiled, and the callers
+then run their numpy twins."""
 
 from __future__ import annotations
 
 import ctypes
 from pathlib import Path
 
-from ..kernels import Kernel
+import numpy as np
+
+from ..geometry import segments_cross
+from ..kernels import Kernel, pointer
 
 _i64, _ptr, _f64 = ctypes.c_int64, ctypes.c_void_p, ctypes.c_double
 
 geometry_kernel = Kernel(Path(__file__).with_name("path_geometry.c"), {
     "path_frame": (None, [_i64, _ptr, _ptr, _i64, _ptr, _ptr, _ptr, _ptr, _f64, _f64, _ptr,
                           _ptr]),
-    "forced_slack_at": (_i64, [_i64, _ptr, _ptr, _ptr, _i64, _ptr, _f64, _f64, _ptr, _ptr])})
+    "forced_slack_at": (_i64, [_i64, _ptr, _ptr, _ptr, _i64, _ptr, _f64, _f64, _ptr, _ptr]),
+    "rays_crossing": (None, [_i64, _ptr, _i64, _ptr, _i64, _ptr, _ptr, ctypes.c_int, _ptr])})
 """The compiled path geometry (call it: the library, or None for the numpy versions)."""
+
+
+def rays_crossing(p, q, a, b, closed: bool = False) -> np.ndarray:
+    """(n,) bool: which lines p[i] -> q[i] ((n, 2), or p one point (2,) for all) cross any
+    wall a[j] -> b[j] ((m, 2)); `closed`: touching counts too. By the kernel, or
+    `rays_crossing_numpy` where there is none."""
+    lib = geometry_kernel()
+    if lib is None:
+        return rays_crossing_numpy(p, q, a, b, closed)
+    q = np.ascontiguousarray(q, float).reshape(-1, 2)
+    p = np.ascontiguousarray(p, float)
+    a, b = np.ascontiguousarray(a, float), np.ascontiguousarray(b, float)
+    out = np.empty(len(q), np.uint8)
+    lib.rays_crossing(len(q), pointer(p), 0 if p.ndim == 1 else 2, pointer(q), len(a),
+                      pointer(a), pointer(b), int(closed), pointer(out))
+    return out.view(bool)
+
+
+def rays_crossing_numpy(p, q, a, b, closed: bool = False) -> np.ndarray:
+    """`rays_crossing`'s numpy twin."""
+    q = np.asarray(q, float).reshape(-1, 2)
+    p = np.broadcast_to(np.asarray(p, float), q.shape)
+    return segments_cross(p, q, np.asarray(a, float), np.asarray(b, float), closed).any(axis=1)

@@ -470,8 +470,30 @@ def _stage_blocks(sparsity: ca.Sparsity, row0: int, col0: int, src0: int):
     return np.asarray(rows) + row0, np.asarray(cols) + col0, np.arange(n) + src0
 
 
+_BUILT: dict = {}  # config -> Ocp, this process's (`build_ocp`)
+
+
 def build_ocp(config: NmpcConfig) -> Ocp:
-    """Variables, dynamics, constraints and their Jacobian, as CasADi Functions of (w, p)."""
+    """Variables, dynamics, constraints and their Jacobian, as CasADi Functions of (w, p).
+
+    Built once per config in a process (its CasADi graphs take about 0.1 s, a tenth of a
+    minute's run; a study or the tests run many): the Ocp is immutable (its index arrays are
+    read-only), so controllers share it."""
+    try:
+        built = _BUILT.get(config)
+    except TypeError:  # a config holding something unhashable: build it afresh
+        return _build_ocp(config)
+    if built is None:
+        if len(_BUILT) >= 8:
+            _BUILT.clear()
+        built = _BUILT[config] = _build_ocp(config)
+        for value in vars(built).values():
+            if isinstance(value, np.ndarray):
+                value.setflags(write=False)
+    return built
+
+
+def _build_ocp(config: NmpcConfig) -> Ocp:
     N = config.horizon
     layout = ParamLayout.of(config)
     nz = NX + NU  # variables per stage

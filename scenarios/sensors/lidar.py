@@ -266,6 +266,26 @@ class _Sensor:
     one the azimuth moves by at most half a bin.
     """
 
+    _made: dict = {}  # (mount, hull) -> _Sensor, this process's (`of`)
+
+    @classmethod
+    def of(cls, mount: LidarMount, hull: HullShape) -> "_Sensor":
+        """The tables of a mount on a hull, computed once per process (~25 ms a mount; a
+        study or the tests build many simulators): read-only, so simulators share them."""
+        key = (mount, hull)
+        try:
+            made = cls._made.get(key)
+        except TypeError:  # unhashable fields: compute afresh
+            return cls(mount, hull)
+        if made is None:
+            if len(cls._made) >= 32:
+                cls._made.clear()
+            made = cls._made[key] = cls(mount, hull)
+            for value in vars(made).values():
+                if isinstance(value, np.ndarray):
+                    value.setflags(write=False)
+        return made
+
     def __init__(self, mount: LidarMount, hull: HullShape) -> None:
         self.mount = mount
         d = mount.beam_directions()
@@ -465,7 +485,7 @@ class LidarSimulator:
         self.compiled = compiled  # False: the numpy version of every step (the reference)
         self.config = config or LidarConfig()
         self.rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
-        self.sensors = [_Sensor(m, self.config.hull) for m in self.config.mounts]
+        self.sensors = [_Sensor.of(m, self.config.hull) for m in self.config.mounts]
         self._beams = _Beams.join(self.sensors)
         self._bin_height = np.concatenate([np.full(s.bins, s.mount.height_m) for s in self.sensors])
         self._beam_start = np.concatenate([[0], np.cumsum([len(s.bin) for s in self.sensors])[:-1]])

@@ -16,6 +16,17 @@ def ocp():
     return build_ocp(NmpcConfig())
 
 
+def test_one_ocp_per_config_in_a_process_and_it_cannot_be_changed(ocp):
+    from controller.nmpc.codegen_cache import compile_cached
+
+    assert build_ocp(NmpcConfig()) is ocp  # built once: controllers share it
+    assert build_ocp(NmpcConfig(horizon=20)) is not ocp
+    with pytest.raises(ValueError, match="read-only"):
+        ocp.states_at[0, 0] = 1  # a controller writing into it would change every other's
+    first = compile_cached(ocp.first_stage)
+    assert compile_cached(ocp.first_stage) is first  # its C not generated again
+
+
 def test_config_defaults_are_the_papers_table():
     c = NmpcConfig()
     assert (c.horizon, c.step_s, c.control_period_s) == (25, 1.0, 0.1)

@@ -57,3 +57,22 @@ def test_forced_slack_of_no_walls_or_far_walls_is_zero():
     assert not forced_slack_at(points, np.zeros(3), np.zeros((0, 4)), 5.0, -4.9).any()
     far = np.array([[0.0, 30.0, 0.0, 10.0]])
     assert not forced_slack_at(points, np.zeros(3), far, 5.0, -4.9).any()
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_rays_crossing_is_its_numpy_twin(seed):
+    from controller.nmpc.path_geometry import rays_crossing, rays_crossing_numpy
+
+    rng = np.random.default_rng(200 + seed)
+    n, m = int(rng.integers(1, 40)), int(rng.integers(0, 30))
+    p, q = rng.uniform(-20, 20, (n, 2)), rng.uniform(-20, 20, (n, 2))
+    a = rng.uniform(-20, 20, (m, 2))
+    b = a + rng.uniform(-6, 6, (m, 2))  # short walls: some lines cross one, some none
+    if m > 2:  # touches: a ray ending on a wall's end, a wall through a ray's start
+        q[0], a[1] = a[0], p[min(1, n - 1)]
+    for closed in (False, True):
+        want = rays_crossing_numpy(p, q, a, b, closed)
+        np.testing.assert_array_equal(rays_crossing(p, q, a, b, closed), want)
+        np.testing.assert_array_equal(rays_crossing(p[0], q, a, b, closed),
+                                      rays_crossing_numpy(p[0], q, a, b, closed))
+    assert 0 < want.sum() < n or n < 8 or m < 8  # both answers occur
