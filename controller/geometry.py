@@ -7,10 +7,18 @@ vectorised over numpy arrays.
 
 from __future__ import annotations
 
+import ctypes
 from dataclasses import dataclass
 from functools import cached_property
+from pathlib import Path
 
 import numpy as np
+
+from .kernels import Kernel, pointer
+
+_nearest_leg_kernel = Kernel(Path(__file__).with_name("kernels") / "nearest_leg.c", {
+    "nearest_leg": (None, [ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64, ctypes.c_void_p,
+                           ctypes.c_void_p, ctypes.c_void_p])})
 
 
 def wrap_angle(angle):
@@ -71,6 +79,29 @@ def point_segment_distance(points, a, b) -> np.ndarray:
     return np.linalg.norm(p - closest, axis=-1)
 
 
+def nearest_leg_distance(points, a, b) -> np.ndarray:
+    """Distance (N,) from each point to the nearest of the segments a-b (inf: none):
+    `point_segment_distance(points, a, b).min(axis=1)`, by the kernel `nearest_leg.c` (the
+    same arithmetic) or, where none can be built, that numpy expression."""
+    p = np.ascontiguousarray(points, float).reshape(-1, 2)
+    a = np.ascontiguousarray(a, float).reshape(-1, 2)
+    b = np.ascontiguousarray(b, float).reshape(-1, 2)
+    if not len(a):
+        return np.full(len(p), np.inf)
+    lib = _nearest_leg_kernel()
+    if lib is None:
+        return point_segment_distance(p, a, b).min(axis=1)
+    out = np.empty(len(p))
+    lib.nearest_leg(len(p), pointer(p), len(a), pointer(a), pointer(b), pointer(out))
+    return out
+
+
+def nearest_leg_compiled() -> bool:
+    """`nearest_leg_distance` runs compiled (else its numpy form: pruning the legs first
+    pays, as `scenarios.results.metrics.Clearance` does)."""
+    return _nearest_leg_kernel() is not None
+
+
 def polyline_segments(polyline) -> tuple[np.ndarray, np.ndarray]:
     """The consecutive segments of an (K, 2) polyline as endpoint arrays a, b of shape (K-1, 2)."""
     pts = np.asarray(polyline, float).reshape(-1, 2)
@@ -94,7 +125,7 @@ def distance_to_polylines(points, polylines) -> np.ndarray:
     for line in polylines:
         a, b = polyline_segments(line)
         if len(a):
-            best = np.minimum(best, point_segment_distance(points, a, b).min(axis=1))
+            best = np.minimum(best, nearest_leg_distance(points, a, b))
     return best
 
 

@@ -6,6 +6,8 @@
  *   legs of a waypoint path whose extent overlaps [s_min, s_max] (WaypointPath.frame).
  * forced_slack_at: the slack each point's hull circle needs midway between the walls abeam
  *   (slack_reference.forced_slack_at), for M segments (x_c, y_c, theta, length) rows.
+ * walls_abeam: the distance from n points to the nearest wall abeam to port and to starboard
+ *   (slack_reference._Frames.walls_abeam), the sines and cosines handed in from numpy.
  * rays_crossing: which of n sight lines p -> q cross any of m walls a -> b
  *   (geometry.segments_cross(...).any(axis=1)), `closed` counting touches too; a p stride
  *   of 0 casts every line from the one point p. */
@@ -166,5 +168,32 @@ void rays_crossing(int64_t n, const double *p, int64_t p_stride, const double *q
             hit = closed ? (d1 * d2 <= 0 && d3 * d4 <= 0) : (d1 * d2 < 0 && d3 * d4 < 0);
         }
         out[i] = hit;
+    }
+}
+
+void walls_abeam(int64_t n, const double *px, const double *py, const double *nx,
+                 const double *ny, int64_t m, const double *sx, const double *sy,
+                 const double *ex, const double *ey, const double *half, double abeam_cos,
+                 double *port, double *starboard)
+{
+    for (int64_t i = 0; i < n; i++) {
+        double p = INFINITY, s = INFINITY;
+        for (int64_t j = 0; j < m; j++) {
+            double dx = px[i] - sx[j], dy = py[i] - sy[j];
+            double along = dx * ex[j] + dy * ey[j], across = dy * ex[j] - dx * ey[j];
+            double cl = along > -half[j] ? along : -half[j];
+            cl = cl < half[j] ? cl : half[j];
+            double va = cl - along, vc = -across;
+            double dist = hypot(va, vc);
+            double n_along = nx[i] * ex[j] + ny[i] * ey[j];
+            double n_across = ny[i] * ex[j] - nx[i] * ey[j];
+            double side = va * n_along + vc * n_across;
+            if (fabs(side) >= abeam_cos * dist) {
+                if (side < 0 && dist < p) p = dist;
+                if (side > 0 && dist < s) s = dist;
+            }
+        }
+        port[i] = p;
+        starboard[i] = s;
     }
 }

@@ -1,6 +1,7 @@
 """The compiled geometry of the NMPC's step (`path_geometry.c`): the path frame of points
-(`WaypointPath.frame`), the forced slack (`slack_reference.forced_slack_at`) and the sight
-lines of the blind-opening rule (`rays_crossing`), the largest numpy costs of a step's set-up
+(`WaypointPath.frame`), the forced slack (`slack_reference.forced_slack_at`), the walls
+abeam (`slack_reference.walls_abeam`) and the sight lines of the blind-opening rule
+(`rays_crossing`), the largest numpy costs of a step's set-up
 after the QP. Loaded once per process; None where nothing can be compiled, and the callers
 then run their numpy twins."""
 
@@ -20,6 +21,7 @@ geometry_kernel = Kernel(Path(__file__).with_name("path_geometry.c"), {
     "path_frame": (None, [_i64, _ptr, _ptr, _i64, _ptr, _ptr, _ptr, _ptr, _f64, _f64, _ptr,
                           _ptr]),
     "forced_slack_at": (_i64, [_i64, _ptr, _ptr, _ptr, _i64, _ptr, _f64, _f64, _ptr, _ptr]),
+    "walls_abeam": (None, [_i64] + [_ptr] * 4 + [_i64] + [_ptr] * 5 + [_f64, _ptr, _ptr]),
     "rays_crossing": (None, [_i64, _ptr, _i64, _ptr, _i64, _ptr, _ptr, ctypes.c_int, _ptr])})
 """The compiled path geometry (call it: the library, or None for the numpy versions)."""
 

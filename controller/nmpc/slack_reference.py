@@ -98,10 +98,31 @@ def walls_abeam(points: np.ndarray, headings: np.ndarray,
                 segments: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Distance (n,) from each point (n, 2) to the nearest wall abeam to port and to
     starboard (inf if none) of a path with headings (n,), among segments (M, 4) rows
-    (x_c, y_c, theta, length): a segment's nearest point within 60 deg of the normal."""
+    (x_c, y_c, theta, length): a segment's nearest point within 60 deg of the normal. By the
+    kernel (`path_geometry.c`), or `walls_abeam_numpy`."""
     points = np.asarray(points, float).reshape(-1, 2)
     if len(segments) == 0:
         return np.full(len(points), np.inf), np.full(len(points), np.inf)
+    lib = geometry_kernel()
+    if lib is None:
+        return walls_abeam_numpy(points, headings, segments)
+    seg = np.asarray(segments, float).reshape(-1, 4)
+    h = np.asarray(headings, float)
+    x, y = np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1])
+    nx, ny = -np.sin(h), np.cos(h)
+    sx, sy = np.ascontiguousarray(seg[:, 0]), np.ascontiguousarray(seg[:, 1])
+    ex, ey, half = np.cos(seg[:, 2]), np.sin(seg[:, 2]), 0.5 * seg[:, 3]
+    port, starboard = np.empty(len(points)), np.empty(len(points))
+    p = pointer
+    lib.walls_abeam(len(points), p(x), p(y), p(nx), p(ny), len(seg), p(sx), p(sy), p(ex),
+                    p(ey), p(half), _ABEAM_COS, p(port), p(starboard))
+    return port, starboard
+
+
+def walls_abeam_numpy(points: np.ndarray, headings: np.ndarray,
+                      segments: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """`walls_abeam`'s numpy twin (the kernel's sines and cosines are numpy's too)."""
+    points = np.asarray(points, float).reshape(-1, 2)
     return _Frames(points, np.asarray(headings, float), segments).walls_abeam()
 
 
