@@ -140,13 +140,17 @@ class CanalWidth:
         self._segments = np.column_stack([(a + b) / 2, np.arctan2(d[:, 1], d[:, 0]), length])
         self._lo, self._hi = np.minimum(a, b), np.maximum(a, b)
         self.reach_m = float(reach_m)
+        self._box_reach, self._box = None, None
 
     def at(self, pose, offsets=HULL_CIRCLE_OFFSETS_M) -> tuple[float, float, float]:
         """(width at the boat's origin, smallest width at the origin and the hull circle
         centres, offset of the origin from the middle: + to starboard of it), metres."""
         pose = np.asarray(pose, float)
         reach = self.reach_m + max(abs(o) for o in offsets)
-        near = np.all((self._lo - reach <= pose[:2]) & (pose[:2] <= self._hi + reach), axis=1)
+        if reach != self._box_reach:  # the legs' boxes grown by the reach, once
+            self._box_reach, self._box = reach, np.concatenate([self._lo - reach,
+                                                                 -(self._hi + reach)], axis=1)
+        near = (self._box <= np.r_[pose[:2], -pose[:2]]).all(axis=1)
         points = np.vstack([pose[:2], hull_circle_centres(pose[None, :3], offsets)[0]])
         port, starboard = walls_abeam(points, np.full(len(points), pose[2]), self._segments[near])
         port = np.where(port <= self.reach_m, port, np.inf)
