@@ -30,6 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..kernels import pointer
+from .path_geometry import geometry_kernel
 from .reference import WaypointPath
 
 
@@ -116,11 +118,52 @@ def sweep(path: WaypointPath, progress_m: float, offset_m: float, segments,
     ahead = (s >= progress_m) & (s <= s_end) & (np.abs(d) <= lateral_m)
     if not ahead.any():
         return None, NO_CHANNEL
-    slab = ((s[ahead] - progress_m) / slab_m).astype(int)
+    slab = ((s[ahead] - progress_m) / slab_m).astype(np.int64)
     d = d[ahead]
     n_slabs = int(math.ceil((s_end - progress_m) / slab_m))
     order = np.lexsort((d, slab))
     slab, d = slab[order], d[order]
+    # Two slabs' intervals connect when they share half a passage: a wall tilted against the
+    # path moves its points a little from slab to slab, which must not connect the water
+    # behind it, while a channel shifting sideways up to 3 m per slab still connects.
+    overlap = 0.5 * min_passage_m
+    keep = overlap if clearance_m is None else max(clearance_m, overlap)
+    at, shifts = walk_slabs(slab, d, n_slabs, lateral_m, min_passage_m, overlap, keep,
+                            offset_m)
+    return (None if at is None else progress_m + at * slab_m), _channel(shifts, progress_m,
+                                                                         slab_m)
+
+
+def walk_slabs(slab: np.ndarray, d: np.ndarray, n_slabs: int, lateral_m: float,
+               min_passage_m: float, overlap: float, keep: float, offset_m: float):
+    """The sweep's walk over slabs 0..n_slabs-1, given the points' slabs and offsets sorted
+    by (slab, offset): the first slab no free interval of which (at least `min_passage_m`
+    wide, between neighbouring points or a point and +-`lateral_m`) shares `overlap` with
+    one reached in the slab before (the boat itself: `offset_m` +- `overlap`), or None; and
+    the (slab, offset) shifts where the path's line has not the room it needs, into the
+    reached interval nearest it (`keep` from its sides where wide enough, else its middle).
+    By the kernel `path_geometry.c`, or `walk_slabs_numpy`."""
+    lib = geometry_kernel()
+    if lib is None:
+        return walk_slabs_numpy(slab, d, n_slabs, lateral_m, min_passage_m, overlap, keep,
+                                offset_m)
+    slab = np.ascontiguousarray(slab, np.int64)
+    d = np.ascontiguousarray(d, float)
+    scratch = np.empty(4 * (len(d) + 2))
+    shift_at, shift_d = np.empty(max(n_slabs, 1), np.int64), np.empty(max(n_slabs, 1))
+    n_shifts = np.zeros(1, np.int64)
+    at = lib.walk_slabs(len(d), pointer(slab), pointer(d), n_slabs, float(lateral_m),
+                        float(min_passage_m), float(overlap), float(keep), float(offset_m),
+                        pointer(scratch), pointer(shift_at), pointer(shift_d),
+                        pointer(n_shifts))
+    k = int(n_shifts[0])
+    return (None if at < 0 else int(at)), list(zip(shift_at[:k].tolist(),
+                                                   shift_d[:k].tolist()))
+
+
+def walk_slabs_numpy(slab: np.ndarray, d: np.ndarray, n_slabs: int, lateral_m: float,
+                     min_passage_m: float, overlap: float, keep: float, offset_m: float):
+    """`walk_slabs`' twin in numpy and Python."""
     # Every free interval of every slab at once: between neighbours in a slab, and from the
     # edges of the lateral range to a slab's first and last point.
     first = np.r_[True, slab[1:] != slab[:-1]]
@@ -136,11 +179,6 @@ def sweep(path: WaypointPath, progress_m: float, offset_m: float, segments,
     occupied = np.zeros(n_slabs + 1, bool)
     occupied[np.minimum(slab, n_slabs)] = True
     occupied = occupied.tolist()
-    # Two slabs' intervals connect when they share half a passage: a wall tilted against the
-    # path moves its points a little from slab to slab, which must not connect the water
-    # behind it, while a channel shifting sideways up to 3 m per slab still connects.
-    overlap = 0.5 * min_passage_m
-    keep = overlap if clearance_m is None else max(clearance_m, overlap)
     reach = [(offset_m - overlap, offset_m + overlap)]  # the boat itself
     shifts = []  # (slab, offset) where the path's line has not the room it needs
     for j in range(n_slabs):
@@ -155,14 +193,14 @@ def sweep(path: WaypointPath, progress_m: float, offset_m: float, segments,
                     reached.append((g0, g1))
                     break
         if not reached:
-            return progress_m + j * slab_m, _channel(shifts, progress_m, slab_m)
+            return j, shifts
         reach = reached
         if not any(g0 <= -overlap and g1 >= overlap for g0, g1 in reached):
             # the line d = 0 is too close to something: into the reached interval nearest it
             targets = [((g0 + g1) / 2 if g1 - g0 < 2 * keep else min(max(0.0, g0 + keep), g1 - keep))
                        for g0, g1 in reached]
             shifts.append((j, min(targets, key=abs)))
-    return None, _channel(shifts, progress_m, slab_m)
+    return None, shifts
 
 
 def _channel(shifts, progress_m: float, slab_m: float) -> Channel:

@@ -8,6 +8,10 @@
  *   (slack_reference.forced_slack_at), for M segments (x_c, y_c, theta, length) rows.
  * walls_abeam: the distance from n points to the nearest wall abeam to port and to starboard
  *   (slack_reference._Frames.walls_abeam), the sines and cosines handed in from numpy.
+ * slot_distances: each of m segments' distance from the boat (the first of k points) and
+ *   from the nearest of all k (the boat and its plan): segment_slots.select_checked's ranking.
+ * walk_slabs: the passage sweep's walk over slabs (passage.walk_slabs): the first slab with
+ *   no free interval reached from the slab before, and where the path's line must shift.
  * rays_crossing: which of n sight lines p -> q cross any of m walls a -> b
  *   (geometry.segments_cross(...).any(axis=1)), `closed` counting touches too; a p stride
  *   of 0 casts every line from the one point p. */
@@ -196,4 +200,99 @@ void walls_abeam(int64_t n, const double *px, const double *py, const double *nx
         port[i] = p;
         starboard[i] = s;
     }
+}
+
+void slot_distances(int64_t k, const double *p, int64_t m, const double *seg, const double *c,
+                    const double *s, double *to_boat, double *to_plan)
+{
+    for (int64_t j = 0; j < m; j++) {
+        const double *g = seg + 4 * j;
+        double best = INFINITY;
+        for (int64_t i = 0; i < k; i++) {
+            double dx = p[2 * i] - g[0], dy = p[2 * i + 1] - g[1];
+            double along = fabs(dx * c[j] + dy * s[j]), across = (-dx) * s[j] + dy * c[j];
+            double off = along - g[3] / 2;
+            double d = hypot(off > 0.0 ? off : 0.0, across);
+            if (i == 0)
+                to_boat[j] = d;
+            if (d < best || i == 0)
+                best = d;
+        }
+        to_plan[j] = best;
+    }
+}
+
+int64_t walk_slabs(int64_t n, const int64_t *slab, const double *d, int64_t n_slabs,
+                   double lateral, double min_passage, double overlap, double keep,
+                   double offset, double *scratch, int64_t *shift_at, double *shift_d,
+                   int64_t *n_shifts)
+{
+    /* intervals as (lo, hi) pairs: those reached so far, and those reached in this slab */
+    double *reach = scratch, *reached = scratch + 2 * (n + 2);
+    int64_t n_reach = 1, pos = 0, ns = 0;
+    reach[0] = offset - overlap;
+    reach[1] = offset + overlap;
+    for (int64_t j = 0; j < n_slabs; j++) {
+        while (pos < n && slab[pos] < j)
+            pos++;
+        if (pos >= n || slab[pos] != j) {  /* nothing in this slab: all of it is open */
+            reach[0] = -lateral;
+            reach[1] = lateral;
+            n_reach = 1;
+            continue;
+        }
+        int64_t end = pos, n_reached = 0;
+        while (end < n && slab[end] == j)
+            end++;
+        /* the free intervals in order: from -lateral to the first point, between
+         * neighbours, from the last point to lateral; the wide enough ones */
+        for (int64_t q = pos - 1; q < end; q++) {
+            double g0 = q < pos ? -lateral : d[q];
+            double g1 = q + 1 < end ? d[q + 1] : lateral;
+            if (!(g1 - g0 >= min_passage))
+                continue;
+            for (int64_t r = 0; r < n_reach; r++) {
+                double r0 = reach[2 * r], r1 = reach[2 * r + 1];
+                double hi = r1 < g1 ? r1 : g1, lo = r0 > g0 ? r0 : g0;
+                if (hi - lo >= overlap) {
+                    reached[2 * n_reached] = g0;
+                    reached[2 * n_reached + 1] = g1;
+                    n_reached++;
+                    break;
+                }
+            }
+        }
+        pos = end;
+        if (!n_reached) {
+            *n_shifts = ns;
+            return j;
+        }
+        double *t = reach;
+        reach = reached;
+        reached = t;
+        n_reach = n_reached;
+        int line_ok = 0;
+        for (int64_t r = 0; r < n_reach; r++)
+            if (reach[2 * r] <= -overlap && reach[2 * r + 1] >= overlap)
+                line_ok = 1;
+        if (!line_ok) {  /* into the reached interval nearest the line d = 0 */
+            double best = 0.0;
+            for (int64_t r = 0; r < n_reach; r++) {
+                double g0 = reach[2 * r], g1 = reach[2 * r + 1], target;
+                if (g1 - g0 < 2 * keep) {
+                    target = (g0 + g1) / 2;
+                } else {
+                    target = g0 + keep > 0.0 ? g0 + keep : 0.0;
+                    target = g1 - keep < target ? g1 - keep : target;
+                }
+                if (r == 0 || fabs(target) < fabs(best))
+                    best = target;
+            }
+            shift_at[ns] = j;
+            shift_d[ns] = best;
+            ns++;
+        }
+    }
+    *n_shifts = ns;
+    return -1;
 }

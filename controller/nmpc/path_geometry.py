@@ -1,6 +1,8 @@
 """The compiled geometry of the NMPC's step (`path_geometry.c`): the path frame of points
 (`WaypointPath.frame`), the forced slack (`slack_reference.forced_slack_at`), the walls
-abeam (`slack_reference.walls_abeam`) and the sight lines of the blind-opening rule
+abeam (`slack_reference.walls_abeam`), the segment slots' ranking (`slot_distances`), the passage sweep's walk
+(`passage.walk_slabs`) and
+the sight lines of the blind-opening rule
 (`rays_crossing`), the largest numpy costs of a step's set-up
 after the QP. Loaded once per process; None where nothing can be compiled, and the callers
 then run their numpy twins."""
@@ -22,6 +24,8 @@ geometry_kernel = Kernel(Path(__file__).with_name("path_geometry.c"), {
                           _ptr]),
     "forced_slack_at": (_i64, [_i64, _ptr, _ptr, _ptr, _i64, _ptr, _f64, _f64, _ptr, _ptr]),
     "walls_abeam": (None, [_i64] + [_ptr] * 4 + [_i64] + [_ptr] * 5 + [_f64, _ptr, _ptr]),
+    "slot_distances": (None, [_i64, _ptr, _i64, _ptr, _ptr, _ptr, _ptr, _ptr]),
+    "walk_slabs": (_i64, [_i64, _ptr, _ptr, _i64] + [_f64] * 5 + [_ptr] * 4),
     "rays_crossing": (None, [_i64, _ptr, _i64, _ptr, _i64, _ptr, _ptr, ctypes.c_int, _ptr])})
 """The compiled path geometry (call it: the library, or None for the numpy versions)."""
 
@@ -47,3 +51,32 @@ def rays_crossing_numpy(p, q, a, b, closed: bool = False) -> np.ndarray:
     q = np.asarray(q, float).reshape(-1, 2)
     p = np.broadcast_to(np.asarray(p, float), q.shape)
     return segments_cross(p, q, np.asarray(a, float), np.asarray(b, float), closed).any(axis=1)
+
+
+def slot_distances(points, segments) -> tuple[np.ndarray, np.ndarray]:
+    """Each segment's ((M, 4) rows x_c, y_c, theta, length) distance from points[0] (the
+    boat) and from the nearest of all the points ((K, 2): the boat, then its plan): the
+    ranking of `segment_slots.select_checked`. By the kernel, or `slot_distances_numpy`."""
+    lib = geometry_kernel()
+    if lib is None:
+        return slot_distances_numpy(points, segments)
+    p = np.ascontiguousarray(points, float).reshape(-1, 2)
+    seg = np.ascontiguousarray(segments, float).reshape(-1, 4)
+    c, s = np.cos(seg[:, 2]), np.sin(seg[:, 2])
+    to_boat, to_plan = np.empty(len(seg)), np.empty(len(seg))
+    lib.slot_distances(len(p), pointer(p), len(seg), pointer(seg), pointer(c), pointer(s),
+                       pointer(to_boat), pointer(to_plan))
+    return to_boat, to_plan
+
+
+def slot_distances_numpy(points, segments) -> tuple[np.ndarray, np.ndarray]:
+    """`slot_distances`' numpy twin: the (K, M) distances, their first row and least."""
+    points = np.asarray(points, float).reshape(-1, 2)
+    segments = np.asarray(segments, float).reshape(-1, 4)
+    dx = points[:, 0:1] - segments[:, 0]
+    dy = points[:, 1:2] - segments[:, 1]
+    c, s = np.cos(segments[:, 2]), np.sin(segments[:, 2])
+    along = np.abs(dx * c + dy * s)
+    across = -dx * s + dy * c
+    distance = np.hypot(np.maximum(along - segments[:, 3] / 2, 0.0), across)
+    return distance[0], distance.min(axis=0)

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from .path_geometry import slot_distances
 
 SLOT_FIELDS = ("x_c", "y_c", "theta", "length", "active")
 
@@ -86,10 +87,10 @@ def select_checked(arr: np.ndarray, position, n_slots: int = 16, range_m: float 
         path = np.asarray(path, float).reshape(-1, 2)
         points = np.empty((len(path) + 1, 2))
         points[0], points[1:] = position[:2], path
-    distance = _distances(points, arr)  # row 0: from the boat
-    in_range = np.flatnonzero(distance[0] <= range_m)
-    to_plan = distance[:, in_range].min(axis=0)
-    order = np.argsort(to_plan + NEAR_FIRST_PER_M * distance[0, in_range], kind="stable")
+    to_boat, to_plan = slot_distances(points, arr)
+    in_range = np.flatnonzero(to_boat <= range_m)
+    to_plan = to_plan[in_range]
+    order = np.argsort(to_plan + NEAR_FIRST_PER_M * to_boat[in_range], kind="stable")
     kept = in_range[order[:n_slots]]
     slots[: len(kept), :4] = arr[kept]
     slots[: len(kept), 4] = 1.0

@@ -76,3 +76,34 @@ def test_rays_crossing_is_its_numpy_twin(seed):
         np.testing.assert_array_equal(rays_crossing(p[0], q, a, b, closed),
                                       rays_crossing_numpy(p[0], q, a, b, closed))
     assert 0 < want.sum() < n or n < 8 or m < 8  # both answers occur
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_slot_distances_are_their_numpy_twin(seed):
+    from controller.nmpc.path_geometry import slot_distances, slot_distances_numpy
+
+    rng = np.random.default_rng(500 + seed)
+    k, m = int(rng.integers(1, 30)), int(rng.integers(1, 40))
+    points = rng.uniform(-40, 40, (k, 2))
+    segments = np.column_stack([rng.uniform(-40, 40, (m, 2)), rng.uniform(-np.pi, np.pi, m),
+                                rng.uniform(0.5, 20, m)])
+    for got, want in zip(slot_distances(points, segments),
+                         slot_distances_numpy(points, segments)):
+        np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_walk_slabs_is_its_numpy_twin(seed):
+    from controller.nmpc.passage import walk_slabs, walk_slabs_numpy
+
+    rng = np.random.default_rng(600 + seed)
+    n_slabs = int(rng.integers(1, 40))
+    n = int(rng.integers(0, 200))
+    slab = rng.integers(0, n_slabs + 1, n)  # (n_slabs itself: a point at the sweep's end)
+    d = np.round(rng.uniform(-30, 30, n), int(rng.integers(0, 3)))  # some equal offsets
+    order = np.lexsort((d, slab))
+    slab, d = slab[order], d[order]
+    args = (n_slabs, 30.0, 6.0, 3.0, rng.choice([3.0, 5.0]), rng.uniform(-5, 5))
+    got, want = walk_slabs(slab, d, *args), walk_slabs_numpy(slab, d, *args)
+    assert got[0] == want[0]
+    assert got[1] == want[1]
