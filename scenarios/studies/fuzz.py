@@ -124,6 +124,16 @@ class _Canal:
         n = np.array([-d[1], d[0]])
         return self.corner + (s - self.leg) * d + offset * n
 
+    def turn(self, offset: float) -> list:
+        """Where a line `offset` east of the centre line turns at the first leg's end: the
+        two offset legs' meeting point (the centre line's points a metre either side of
+        the corner, offset, would step back on the inside of the bend)."""
+        if self.junction:
+            return [self.at(self.leg - 1.0, offset), self.at(self.leg + 1.0, offset)]
+        n0 = np.array([0.0, 1.0])
+        n1 = np.array([-math.sin(self.bend), math.cos(self.bend)])
+        return [self.corner + offset * (n0 + n1) / (1.0 + float(n0 @ n1))]
+
     def heading(self, s: float) -> float:
         return 0.0 if s <= self.leg or self.junction else self.bend
 
@@ -186,8 +196,7 @@ def _vessel(kind: str, k: int, canal: _Canal, rng, place: str) -> tuple[str, flo
         v = float(rng.uniform(1.0, 2.5))
         off = -float(rng.uniform(0.1, 0.3)) * w
         s0 = min(s_meet + v * t_meet, canal.length - 5.0)
-        pts = [canal.at(s0, off), canal.at(canal.leg + 1.0, off), canal.at(canal.leg - 1.0, off),
-               canal.at(5.0, off)]
+        pts = [canal.at(s0, off), *canal.turn(off)[::-1], canal.at(5.0, off)]
         if s0 <= canal.leg + 1.0:
             pts = [canal.at(s0, off), canal.at(5.0, off)]
         return _route(name, _hull(rng, 6.0, 14.0), pts, v, max(0.0, t_meet - (s0 - s_meet) / v)), \
@@ -197,7 +206,7 @@ def _vessel(kind: str, k: int, canal: _Canal, rng, place: str) -> tuple[str, flo
         off = float(rng.uniform(0.1, 0.25)) * w if kind == "overtaken" else 0.0
         s0 = max(s_meet - v * t_meet, 30.0)
         hull = _hull(rng, 6.0, 12.0) if kind == "overtaken" else _hull(rng, 20.0, 30.0, barge=True)
-        pts = [canal.at(s0, off), canal.at(canal.leg - 1.0, off), canal.at(canal.leg + 1.0, off),
+        pts = [canal.at(s0, off), *canal.turn(off),
                canal.at(canal.length + 60.0, off)]  # on past the canal's end: the goal clears
         if s0 >= canal.leg - 1.0:
             pts = [canal.at(s0, off), canal.at(canal.length + 60.0, off)]
