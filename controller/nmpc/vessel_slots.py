@@ -149,14 +149,18 @@ def along_path(path, window, positions, velocities, t, predicted, headings) -> n
 
 
 def _in_lane(path, window, positions, boat, predicted, headings, rows) -> None:
-    """Vessels `rows` (at `positions`) met head-on, placed in place at every stage abeam of
-    the boat's planned place (`boat`, (Np, 2)) in their own lane: at the boat's arc length,
-    or where the vessel is now if the plan goes beyond it, at the vessel's offset."""
+    """Vessels `rows` (at `positions`) met head-on, placed at every stage in their own lane
+    (at the vessel's offset): where the vessel is predicted while that is still ahead of
+    the boat's planned place (`boat`, (Np, 2)), abeam of it from when they would have met,
+    and never beyond where the vessel is now. So the lane is taken from where the vessel
+    will be: a boat in it when a vessel comes into view far ahead has the time to move
+    over (abeam of the boat from the first stage, it had to be out of the lane at once)."""
     s_min, s_max = (0.0, None) if window is None else window
     s_v, d_v = path.frame(positions, max(s_min, 0.0), s_max)
     s_b, _ = path.frame(boat, max(s_min, 0.0), s_max)
     for k, i in enumerate(rows):
-        s_k = np.minimum(s_b, s_v[k])
+        s_pred, _ = path.frame(predicted[i], max(s_min, 0.0), s_max)
+        s_k = np.minimum(np.maximum(s_b, s_pred), s_v[k])
         xy, h = path.at(s_k)
         predicted[i, :, 0] = xy[:, 0] - d_v[k] * np.sin(h)
         predicted[i, :, 1] = xy[:, 1] + d_v[k] * np.cos(h)

@@ -50,6 +50,26 @@ def test_vessel_slots_predict_at_constant_velocity_and_grow_with_uncertainty():
     assert sel.ids == (1,) and sel.dropped == 1  # the one that comes closest gets the slot
 
 
+def test_a_lane_is_taken_from_where_the_vessel_will_be():
+    """A vessel met head-on in its lane (-4 m across a straight route) is placed where it is
+    predicted while that is ahead of the boat's plan, abeam of the plan once they would
+    have met, never beyond where it is now: a boat in the lane when the vessel is 60 m off
+    has the time to move over."""
+    from controller.nmpc.reference import waypoint_path
+
+    path = waypoint_path(np.array([[0.0, 0.0], [200.0, 0.0]]))
+    tr = vessel_at(0.0, (60.0, -4.0), (-2.0, 0.0))
+    plan = np.column_stack([2.0 * np.arange(26), np.zeros(26)])  # 2 m/s up the route
+    sel = predict_vessels([tr], 1, 25, 1.0, plan=plan, path=path, path_window=(0.0, 200.0),
+                          lanes=frozenset({1}))
+    x = sel.slots[:, 0, 0]
+    t = np.arange(1, 26)
+    ahead = 60.0 - 2.0 * t > 2.0 * t  # before they would have met (t < 15 s)
+    assert np.allclose(x[ahead], 60.0 - 2.0 * t[ahead])  # where it will be
+    assert np.allclose(x[~ahead], np.minimum(2.0 * t[~ahead], 60.0))  # then abeam of the plan
+    assert np.allclose(sel.slots[:, 0, 1], -4.0)  # in its lane throughout
+
+
 def test_the_vessel_constraint_is_the_super_ellipse_around_the_inflated_hull():
     cfg = NmpcConfig(segment_slots=1, vessel_slots=1)
     h = clearance_function(cfg)

@@ -26,12 +26,14 @@ def test_encounter_ends_without_a_controller_failure(path, perception, tmp_path)
     assert not failed, "; ".join(failed)
 
 
-def test_following_a_barge_meeting_a_launch_fails_the_hard_qp(tmp_path):
+def test_meeting_round_a_bend_while_following_fails_the_hard_qp(tmp_path):
     """An encounter that is a real test of the exact penalty: with the paper's hard
-    obstacle rows the same run ends with a controller failure. (The workboat from port
-    was one while known walls handed the workboat over through the buildings, 59 m off.)"""
+    obstacle rows the same run ends with a controller failure. (Following a barge while
+    meeting a launch was one until the lanes were taken from where the vessel will be, and
+    the workboat from port while known walls handed the workboat over through the
+    buildings, 59 m off.)"""
     scenario = load_scenario(Path(__file__).parent / "encounters"
-                             / "following_a_barge_meeting_a_launch.toml")
+                             / "meeting_round_a_bend_while_following.toml")
     hard = replace(scenario, controller_options={**scenario.controller_options,
                                                  "obstacle_rows": "hard"})
     summary = run_scenario(hard, tmp_path, plots=False).summary
