@@ -7,8 +7,9 @@ rules decide where the reference asks it to be, so that it passes the way other 
   of the channel, so the two pass port to port. The reference path moves to starboard by half
   of the room on that side, never closer than R_b + d_p to the starboard wall. Where the
   channel leaves the hull room beside the vessel all the way to it, its lane counts as taken
-  for the whole horizon (`Encounter.lane`, `vessel_slots`), so the plan keeps to its side
-  instead of backing away from a vessel it can pass.
+  from where the vessel will be to the end of the horizon (`Encounter.lane`,
+  `vessel_slots`), so the plan moves over in time and keeps to its side instead of backing
+  away from a vessel it can pass.
 - Overtaking (Rules 9(e) and 13): a slower vessel ahead going the same way: pass it on its port
   side where the channel leaves room beside it (two hull circles and both separations, 2 R_b
   + d_v + d_p), else on its starboard side, never on the side a vessel given way to is
