@@ -64,6 +64,8 @@ class SolverStats:
     # preparation's, made at the predicted state: the feedback only embedded the state
     elastic_segments: float = 0.0  # the last QP's largest violation of a segment row (h)
     elastic_vessels: float = 0.0  # ... and of a vessel row (exact-penalty rows; 0: none)
+    restarted: bool = False  # solved again from the reference: the plan from the last one
+    # broke obstacle rows by more than `NmpcConfig.restart_elastic_h`, and that did less
 
     @property
     def time_glue_s(self) -> float:
@@ -278,6 +280,7 @@ class NmpcController:
         self._way.reset()
         self._rules_stop: Shaping | None = None
         self._giving_way: frozenset = frozenset()  # track ids given way to last period
+        self._restart_rest = 0  # steps left before another restart from the reference
         self._rules_clear_s = 0.0
         self._prepared: _Prepared | None = None
         self._inputs: _Inputs | None = None  # the last step's, for the next preparation
@@ -369,13 +372,13 @@ class NmpcController:
         """
         done = self._feedback(state, actuators, segments, waypoints, target_speed_mps,
                               current, elapsed_s, blind, bias, vessels)
-        preparation, self._preparation_s = self._preparation_s if done[-1] else 0.0, 0.0
+        preparation, self._preparation_s = self._preparation_s if done[-2] else 0.0, 0.0
         return self._output(*done, preparation)
 
     def _feedback(self, state, actuators, segments, waypoints, target_speed_mps: float,
                   current, elapsed_s, blind, bias, vessels) -> tuple:
         """The feedback up to the command; returns what `_output` needs (ends with whether the
-        step used a preparation)."""
+        step used a preparation and whether it was solved again from the reference)."""
         cpu0 = time.thread_time()  # read outside the wall clock's window: a loaded machine
         t0 = time.perf_counter()  # can take the CPU away in this system call
         c = self.config
@@ -441,6 +444,10 @@ class NmpcController:
         self._last_p = p
         self.last_qp_inputs = (p, w_ref, guess)  # what this step's OCP was given (its
         # parameters, reference and warm start; buffers reused by later steps): for peers
+        restarted = False
+        self._elastic = None  # (the QP's own, unless a restart chose between two)
+        if result.ok and not from_safe_guess:
+            result, restarted = self._restart_if_elastic(result, x_init, reference, setup)
         if not result.ok and not from_safe_guess:
             retry = self._solve(self._safe_guess(x_init, reference, setup.slack_ref), p, w_ref,
                                 lbw, ubw)
@@ -468,7 +475,38 @@ class NmpcController:
         times = wall, time.thread_time() - cpu0
         return (plan, command, reference, result, fallback, times, setup.selection,
                 setup.stop, setup.vessel_sel, setup.rules, fed_back, set_up,
-                prepared is not None)
+                prepared is not None, restarted)
+
+    def _restart_if_elastic(self, result: SqpResult, x_init, reference, setup):
+        """RTI follows the plan it has: one that passes a vessel on the wrong side of its
+        predicted hull (ahead of a kayak crossing, not stopping short as the rules ask) stays
+        that plan step after step, breaking obstacle rows by more and more. Where the QP's
+        rows broke by more than `restart_elastic_h`, the step is solved again from the
+        reference (the rules' plan, `_safe_guess`) and the one that breaks them less (by at
+        least half) is kept: (result, whether it was the restart's)."""
+        limit = self.config.restart_elastic_h
+        qp = getattr(self, "_qp", None)
+        if not limit or qp is None:
+            return result, False
+        first = qp.elastic()
+        if max(first) <= limit:
+            return result, False
+        if self._restart_rest > 0:  # the last restart did no better: not again for a second
+            self._restart_rest -= 1
+            return result, False
+        retry = self._solve(self._safe_guess(x_init, reference, setup.slack_ref), setup.p,
+                            setup.w_ref, setup.lbw, setup.ubw)
+        second = qp.elastic()
+        if retry.ok and max(second) < 0.5 * max(first):
+            self._elastic = second
+            return self._merge(result, retry), True
+        self._elastic = first
+        self._restart_rest = int(round(1.0 / self.config.control_period_s))
+        return SqpResult(result.w, result.ok, result.converged, result.status,
+                         result.sqp_iterations + retry.sqp_iterations,
+                         result.qp_iterations + retry.qp_iterations, result.step_norm,
+                         result.time_linearisation_s + retry.time_linearisation_s,
+                         result.time_qp_s + retry.time_qp_s), False
 
     # -- pieces -----------------------------------------------------------------------------
     def _setup(self, x: np.ndarray, inputs: "_Inputs", elapsed: float,
@@ -807,14 +845,15 @@ class NmpcController:
 
     def _output(self, plan, command, reference, result: SqpResult, fallback: str,
                 times: tuple[float, float], selection, stop, vessel_sel, rules,
-                fed_back: bool, set_up: bool, prepared: bool,
+                fed_back: bool, set_up: bool, prepared: bool, restarted: bool,
                 preparation_s: float) -> NmpcStep:
         """The step as the caller gets it: `times` are the feedback's (wall, CPU), the
         preparation's seconds (the one before this feedback, or with `split` the one after)
         count in the step's total."""
         command, rates, clipped = command
         qp = getattr(self, "_qp", None)  # (IPOPT has none)
-        elastic = qp.elastic() if qp is not None else (0.0, 0.0)
+        elastic = getattr(self, "_elastic", None) or (
+            qp.elastic() if qp is not None else (0.0, 0.0))
         stats = SolverStats(
             method=self.method, ok=result.ok, converged=result.converged, status=result.status,
             fallback=fallback, sqp_iterations=result.sqp_iterations,
@@ -829,6 +868,6 @@ class NmpcController:
             rules=rules.reason, fed_back=fed_back, set_up_in_preparation=set_up,
             time_feedback_s=times[0],
             time_preparation_s=preparation_s, elastic_segments=elastic[0],
-            elastic_vessels=elastic[1])
+            elastic_vessels=elastic[1], restarted=restarted)
         return NmpcStep(command, rates, plan[self._states_boat_at], plan[self._inputs_rates_at],
                         plan[self._slack_ref_at], reference, stats)

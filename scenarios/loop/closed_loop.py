@@ -159,6 +159,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
     collided = False
     fallback_steps = 0
     elastic_max, elastic_steps = [0.0, 0.0], 0  # the NMPC's soft obstacle rows (h units)
+    restarts = 0  # steps the NMPC solved again from the reference (rows broken too far)
     waiting_before = ""
     takes = inspect.signature(controller.step).parameters
     takes_blind, takes_vessels = "blind" in takes, "vessels" in takes
@@ -225,6 +226,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
             watch.update(t, out.state, segs)
             waiting = str(decision.stats.get("waiting", ""))
             fallback_steps += bool(decision.stats.get("fallback", ""))
+            restarts += bool(decision.stats.get("restarted", False))
             elastic = decision.stats.get("elastic")
             if elastic is not None:
                 elastic_max = [max(a, b) for a, b in zip(elastic_max, elastic)]
@@ -311,7 +313,8 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
         # how far the NMPC's QPs had to violate their linearised obstacle rows (units of h,
         # about metres per metre of margin; exact-penalty rows only) and on how many steps
         "elastic": {"max_segment_rows": _round(elastic_max[0]),
-                    "max_vessel_rows": _round(elastic_max[1]), "steps": elastic_steps},
+                    "max_vessel_rows": _round(elastic_max[1]), "steps": elastic_steps,
+                    "restarts": restarts},
     }
     episodes = metrics.waiting_episodes(rows_waiting, rows_speed, cfg.control_period_s)
     summary.update({k: _round(v) for k, v in episodes.items()})

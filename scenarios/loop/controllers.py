@@ -106,7 +106,8 @@ class NmpcController:
                    "preparation_s": st.stats.time_preparation_s,
                    "nmpc_step_s": st.stats.time_total_s, "fed_back": st.stats.fed_back,
                    "set_up_in_preparation": st.stats.set_up_in_preparation,
-                   "elastic": (st.stats.elastic_segments, st.stats.elastic_vessels)},
+                   "elastic": (st.stats.elastic_segments, st.stats.elastic_vessels),
+                   "restarted": st.stats.restarted},
         )
 
     def prepare(self) -> None:
