@@ -109,6 +109,11 @@ class TrackerConfig:
     # closed an outline of their own (both ends seen through beyond, along an axis); one at
     # rest is handed on only while such a cluster came within the last hull_hold_s.
     hull_hold_s: float = 1.0
+    # Reacquiring: a track confirmed where a confirmed one died within reacquire_s takes its
+    # id (the vessel went out of sight and came back), its prediction's reach grown by
+    # reacquire_m beyond the covariance's (the centre of a part seen is a guess).
+    reacquire_s: float = 6.0
+    reacquire_m: float = 2.0
     segment_margin_m: float = 0.5  # a segment this close inside a moving vessel's box is its
     # Wall memory: lines of segments longer than any vessel seen in the last wall_memory_s
     # claim the pieces on them up to wall_reach_m beyond their ends (the quay between and
@@ -380,6 +385,7 @@ class VesselTracker:
         det = self.config.detection
         self._occluder_crop = _tracker_crop(self.config)
         self._tracks: list[_Tracked] = []
+        self._lost: list[_Tracked] = []  # confirmed tracks that died lately (`_reacquire`)
         self._next_id = 1
         self._time_s: float | None = None
         self.counts = dict.fromkeys(STATUSES, 0)  # over the run
@@ -493,8 +499,11 @@ class VesselTracker:
                 k.misses += 1
             k.scans += 1
             if math.isnan(k.confirmed_s) and k.hits >= cfg.confirm_hits \
-                    and (k.hull_hits >= cfg.confirm_hits or k.moving):
-                k.confirmed_s = t
+                    and (k.hull_hits >= cfg.confirm_hits or k.moving) \
+                    and not any(o is not k and not math.isnan(o.confirmed_s)
+                                and _inside(o, k.kf.x[:2], cfg) for o in self._tracks):
+                k.confirmed_s = t  # (not a second track inside a confirmed one's outline)
+                self._reacquire(t, k)
         for b in np.flatnonzero(~used).tolist():
             if not any(_inside(k, found.centre[b], cfg) for k in self._tracks):
                 self._birth(t, found, b, sensor)
@@ -514,8 +523,31 @@ class VesselTracker:
         self._next_id += 1
         self._tracks.append(k)
 
+    def _reacquire(self, t: float, k: _Tracked) -> None:
+        """A track just confirmed where a confirmed track was lost lately (out of sight
+        behind a corner, another boat, the own cabin) takes its id: the nearest whose
+        constant-velocity prediction, with a reach growing with the time unseen, holds the
+        new centre, with a velocity within reach of the new one's."""
+        cfg = self.config
+        best, best_d = None, math.inf
+        for lost in self._lost:
+            dt = t - lost.last_hit_s
+            x = lost.kf.x
+            sp = math.sqrt(max(np.trace(lost.kf.P[:2, :2]), 0.0))
+            sv = math.sqrt(max(np.trace(lost.kf.P[2:, 2:]) + np.trace(k.kf.P[2:, 2:]), 0.0))
+            reach = (0.5 * max(float(lost.extent.max()), float(k.extent.max())) + 3.0 * sp
+                     + 3.0 * sv * dt + 1.5 * cfg.accel_sigma_mps2 * dt * dt + cfg.reacquire_m)
+            d = float(np.hypot(*(k.kf.x[:2] - x[:2] - dt * x[2:])))
+            dv = float(np.hypot(*(k.kf.x[2:] - x[2:])))
+            if d <= reach and dv <= 3.0 * sv + cfg.moving_mps and d / reach < best_d:
+                best, best_d = lost, d / reach
+        if best is not None:
+            k.id = best.id
+            self._lost.remove(best)
+
     def _end_of_life(self, t: float, pose, scanned: bool) -> None:
         cfg = self.config
+        self._lost = [k for k in self._lost if t - k.last_hit_s <= cfg.reacquire_s]
         keep = []
         for k in self._tracks:
             if math.isnan(k.confirmed_s):
@@ -527,6 +559,8 @@ class VesselTracker:
                 dead = not _in_view(k, pose, cfg)
             if not dead:
                 keep.append(k)
+            elif not math.isnan(k.confirmed_s):
+                self._lost.append(k)
         self._tracks = keep
 
     def _output(self, t, segs: np.ndarray, n_clusters: int, status: str) -> TrackerOutput:
