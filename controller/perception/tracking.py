@@ -534,9 +534,10 @@ class VesselTracker:
             dt = t - lost.last_hit_s
             x = lost.kf.x
             sp = math.sqrt(max(np.trace(lost.kf.P[:2, :2]), 0.0))
-            sv = math.sqrt(max(np.trace(lost.kf.P[2:, 2:]) + np.trace(k.kf.P[2:, 2:]), 0.0))
+            sl = math.sqrt(max(np.trace(lost.kf.P[2:, 2:]), 0.0))
+            sv = math.sqrt(sl * sl + max(np.trace(k.kf.P[2:, 2:]), 0.0))
             reach = (0.5 * max(float(lost.extent.max()), float(k.extent.max())) + 3.0 * sp
-                     + 3.0 * sv * dt + 1.5 * cfg.accel_sigma_mps2 * dt * dt + cfg.reacquire_m)
+                     + 3.0 * sl * dt + 1.5 * cfg.accel_sigma_mps2 * dt * dt + cfg.reacquire_m)
             d = float(np.hypot(*(k.kf.x[:2] - x[:2] - dt * x[2:])))
             dv = float(np.hypot(*(k.kf.x[2:] - x[2:])))
             if d <= reach and dv <= 3.0 * sv + cfg.moving_mps and d / reach < best_d:
