@@ -527,9 +527,10 @@ class VesselTracker:
         """A track just confirmed where a confirmed track was lost lately (out of sight
         behind a corner, another boat, the own cabin) takes its id: the nearest whose
         constant-velocity prediction, with a reach growing with the time unseen, holds the
-        new centre, with a velocity within reach of the new one's."""
+        new centre, with a velocity within reach of the new one's; of several, the one seen
+        last (the id the vessel had last, not an older one lost at the same place)."""
         cfg = self.config
-        best, best_d = None, math.inf
+        best, best_d = None, -math.inf
         for lost in self._lost:
             dt = t - lost.last_hit_s
             x = lost.kf.x
@@ -540,8 +541,8 @@ class VesselTracker:
                      + 3.0 * sl * dt + 1.5 * cfg.accel_sigma_mps2 * dt * dt + cfg.reacquire_m)
             d = float(np.hypot(*(k.kf.x[:2] - x[:2] - dt * x[2:])))
             dv = float(np.hypot(*(k.kf.x[2:] - x[2:])))
-            if d <= reach and dv <= 3.0 * sv + cfg.moving_mps and d / reach < best_d:
-                best, best_d = lost, d / reach
+            if d <= reach and dv <= 3.0 * sv + cfg.moving_mps and lost.last_hit_s > best_d:
+                best, best_d = lost, lost.last_hit_s
         if best is not None:
             k.id = best.id
             self._lost.remove(best)
