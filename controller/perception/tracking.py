@@ -5,8 +5,9 @@ a constant-velocity Kalman filter (filterpy), state [x, y, vx, vy] in the inerti
 clusters are assigned to tracks by the Hungarian method (`scipy.optimize.
 linear_sum_assignment`) on the Mahalanobis distance, gated; a matched track is updated, an
 unmatched cluster starts a tentative track, confirmed after `confirm_hits` hits within its
-first `confirm_window` scans once it shows a hull (below); a track dies after `max_misses` scans or `max_coast_s` unseen,
-or when it leaves the view.
+first `confirm_window` scans once it shows a hull (below); a track dies after `max_misses`
+scans or `max_coast_s` unseen, or when it leaves the view; one confirmed where a confirmed
+track died lately takes that one's id (`_reacquire`).
 
 What a cluster measures. The points lie on the faces turned to the sensor, so the box around
 them is partial: an L, a line, a bow alone. The tracker keeps the vessel's extent along and
