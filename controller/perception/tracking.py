@@ -5,8 +5,9 @@ a constant-velocity Kalman filter (filterpy), state [x, y, vx, vy] in the inerti
 clusters are assigned to tracks by the Hungarian method (`scipy.optimize.
 linear_sum_assignment`) on the Mahalanobis distance, gated; a matched track is updated, an
 unmatched cluster starts a tentative track, confirmed after `confirm_hits` hits within its
-first `confirm_window` scans; a track dies after `max_misses` scans or `max_coast_s` unseen,
-or when it leaves the view.
+first `confirm_window` scans once it shows a hull (below); a track dies after `max_misses`
+scans or `max_coast_s` unseen, or when it leaves the view; one confirmed where a confirmed
+track died lately takes that one's id (`_reacquire`).
 
 What a cluster measures. The points lie on the faces turned to the sensor, so the box around
 them is partial: an L, a line, a bow alone. The tracker keeps the vessel's extent along and
@@ -29,6 +30,14 @@ and `moving` turns on only after `moving_hits` updates in a row in which the spe
 the directions the update measured, is above `moving_mps` and significant given the
 covariance (chi-square), and off after as many without; a track that is not moving is an
 obstacle like a wall, and its segments stay in `static_segments`.
+
+Hull evidence. A piece of quay seen through a side canal's mouth or at a corner makes a
+cluster as well, and the way its visible part grows with the own boat's motion can even look
+like motion. What a hull has and a piece of wall has not is an outline of its own: along
+some axis, water seen beyond both ends (or beyond the far one only in the object's own
+shadow), where a wall goes on into the next wall or behind the corner that hides it. A track
+is confirmed when moving, or after `confirm_hits` such clusters; one at rest is handed on
+only while such a cluster came within the last `hull_hold_s`.
 """
 
 from __future__ import annotations
@@ -97,6 +106,15 @@ class TrackerConfig:
     moving_mps: float = 0.3
     moving_chi2: float = 13.8  # v' P_vv^-1 v: speed significant given the covariance
     moving_hits: int = 5  # updates in a row passing (failing) the test to turn on (off)
+    # Hull evidence: a track is confirmed when moving, or after confirm_hits clusters that
+    # closed an outline of their own (both ends seen through beyond, along an axis); one at
+    # rest is handed on only while such a cluster came within the last hull_hold_s.
+    hull_hold_s: float = 1.0
+    # Reacquiring: a track confirmed where a confirmed one died within reacquire_s takes its
+    # id (the vessel went out of sight and came back), its prediction's reach grown by
+    # reacquire_m beyond the covariance's (the centre of a part seen is a guess).
+    reacquire_s: float = 6.0
+    reacquire_m: float = 2.0
     segment_margin_m: float = 0.5  # a segment this close inside a moving vessel's box is its
     # Wall memory: lines of segments longer than any vessel seen in the last wall_memory_s
     # claim the pieces on them up to wall_reach_m beyond their ends (the quay between and
@@ -261,6 +279,9 @@ class _Tracked:
         self.first_seen_s = self.last_hit_s = float(time_s)
         self.confirmed_s = math.nan
         self.moving, self._votes = False, 0
+        # Clusters that closed its outline along an axis (both ends its own, `_real_ends`):
+        # a hull; a piece of wall seen through a gap or at a corner goes on into the wall.
+        self.hull_hits, self.hull_s = 0, -math.inf  # how many, the last one's time
         self.seen_box = None  # (u, v, lo, hi) of this scan's cluster, for static_segments
 
     def predict(self, dt: float, cfg: TrackerConfig) -> None:
@@ -365,6 +386,7 @@ class VesselTracker:
         det = self.config.detection
         self._occluder_crop = _tracker_crop(self.config)
         self._tracks: list[_Tracked] = []
+        self._lost: list[_Tracked] = []  # confirmed tracks that died lately (`_reacquire`)
         self._next_id = 1
         self._time_s: float | None = None
         self.counts = dict.fromkeys(STATUSES, 0)  # over the run
@@ -469,14 +491,20 @@ class VesselTracker:
                 if realigned:  # new axes, new extents: the centre is where they put it
                     shift = z - k.kf.x[:2]
                 k.update(t, z, r, extent, shift, box[2], cfg)
+                if box[3]:
+                    k.hull_hits, k.hull_s = k.hull_hits + 1, t
                 k.seen_box = box
                 used[b] = True
         for k in self._tracks:
             if k.seen_box is None:
                 k.misses += 1
             k.scans += 1
-            if math.isnan(k.confirmed_s) and k.hits >= cfg.confirm_hits:
-                k.confirmed_s = t
+            if math.isnan(k.confirmed_s) and k.hits >= cfg.confirm_hits \
+                    and (k.hull_hits >= cfg.confirm_hits or k.moving) \
+                    and not any(o is not k and not math.isnan(o.confirmed_s)
+                                and _inside(o, k.kf.x[:2], cfg) for o in self._tracks):
+                k.confirmed_s = t  # (not a second track inside a confirmed one's outline)
+                self._reacquire(t, k)
         for b in np.flatnonzero(~used).tolist():
             if not any(_inside(k, found.centre[b], cfg) for k in self._tracks):
                 self._birth(t, found, b, sensor)
@@ -492,21 +520,50 @@ class VesselTracker:
         k.kf.P[:2, :2] = (vecs * np.minimum(w, (0.5 * extent.max()) ** 2)) @ vecs.T
         k.extent = extent
         k.seen_box = box
+        k.hull_hits, k.hull_s = (1, t) if box[3] else (0, -math.inf)
         self._next_id += 1
         self._tracks.append(k)
 
+    def _reacquire(self, t: float, k: _Tracked) -> None:
+        """A track just confirmed where a confirmed track was lost lately (out of sight
+        behind a corner, another boat, the own cabin) takes its id: the nearest whose
+        constant-velocity prediction, with a reach growing with the time unseen, holds the
+        new centre, with a velocity within reach of the new one's; of several, the one seen
+        last (the id the vessel had last, not an older one lost at the same place)."""
+        cfg = self.config
+        best, best_d = None, -math.inf
+        for lost in self._lost:
+            dt = t - lost.last_hit_s
+            x = lost.kf.x
+            sp = math.sqrt(max(np.trace(lost.kf.P[:2, :2]), 0.0))
+            sl = math.sqrt(max(np.trace(lost.kf.P[2:, 2:]), 0.0))
+            sv = math.sqrt(sl * sl + max(np.trace(k.kf.P[2:, 2:]), 0.0))
+            reach = (0.5 * max(float(lost.extent.max()), float(k.extent.max())) + 3.0 * sp
+                     + 3.0 * sl * dt + 1.5 * cfg.accel_sigma_mps2 * dt * dt + cfg.reacquire_m)
+            d = float(np.hypot(*(k.kf.x[:2] - x[:2] - dt * x[2:])))
+            dv = float(np.hypot(*(k.kf.x[2:] - x[2:])))
+            if d <= reach and dv <= 3.0 * sv + cfg.moving_mps and lost.last_hit_s > best_d:
+                best, best_d = lost, lost.last_hit_s
+        if best is not None:
+            k.id = best.id
+            self._lost.remove(best)
+
     def _end_of_life(self, t: float, pose, scanned: bool) -> None:
         cfg = self.config
+        self._lost = [k for k in self._lost if t - k.last_hit_s <= cfg.reacquire_s]
         keep = []
         for k in self._tracks:
             if math.isnan(k.confirmed_s):
-                dead = k.misses >= cfg.tentative_misses or (scanned and k.scans > cfg.confirm_window)
+                dead = k.misses >= cfg.tentative_misses or (
+                    scanned and k.scans > cfg.confirm_window and k.hits < cfg.confirm_hits)
             else:
                 dead = k.misses >= cfg.max_misses or t - k.last_hit_s > cfg.max_coast_s
             if not dead and pose is not None:
                 dead = not _in_view(k, pose, cfg)
             if not dead:
                 keep.append(k)
+            elif not math.isnan(k.confirmed_s):
+                self._lost.append(k)
         self._tracks = keep
 
     def _output(self, t, segs: np.ndarray, n_clusters: int, status: str) -> TrackerOutput:
@@ -516,7 +573,11 @@ class VesselTracker:
         for k in confirmed:
             if k.moving:
                 on_vessel |= _segments_on(k, segs, self.config)
-        return TrackerOutput(t, tuple(k.snapshot(t) for k in confirmed), segs[~on_vessel],
+        # A track at rest is handed on while it shows a hull of its own now and then: a
+        # piece of wall that once looked closed (a glitch) does not stay a boat.
+        shown = [k for k in confirmed
+                 if k.moving or not t - k.hull_s > self.config.hull_hold_s]
+        return TrackerOutput(t, tuple(k.snapshot(t) for k in shown), segs[~on_vessel],
                              len(self._tracks) - len(confirmed), n_clusters, status)
 
 
@@ -621,7 +682,7 @@ def _measure(k: _Tracked, found: Clusters, b: int, sensor, cfg: TrackerConfig):
                         cfg.max_vessel_length_m)
     if k.moving:  # a boat under way is longer than wide
         extent[0] = min(max(extent[0], cfg.prior_aspect * extent[1]), cfg.max_vessel_length_m)
-    real = _real_ends(found, b, axes, proj, lo_hi, cfg)
+    real, own = _real_ends(found, b, axes, proj, lo_hi, cfg)
     z = np.empty(2)
     sigma = np.empty(2)
     shift = np.zeros(2)
@@ -643,15 +704,19 @@ def _measure(k: _Tracked, found: Clusters, b: int, sensor, cfg: TrackerConfig):
             z[i] = lo + 0.5 * extent[i] if anchor_lo else hi - 0.5 * extent[i]
             sigma[i] = math.hypot(cfg.meas_sigma_m, cfg.anchor_sigma_m)
     r = (axes.T * sigma ** 2) @ axes
-    return axes.T @ z, r, extent, axes.T @ shift, (axes, lo_hi, axes[informative])
+    closed = bool((own[:, 0] & own[:, 1]).any())  # an outline of its own along an axis
+    return axes.T @ z, r, extent, axes.T @ shift, (axes, lo_hi, axes[informative], closed)
 
 
-def _real_ends(found: Clusters, b: int, axes, proj, lo_hi, cfg: TrackerConfig) -> np.ndarray:
-    """(2, 2) bool [axis, low/high end]: the end is the object's, not cut off by the crop
-    (no corner within `edge_m` of it cut in its direction) and not hidden: the scan saw
-    through the water `free_step_m` beyond its corners (those at the end itself: a point
-    beyond a corner of the side next to it would lie on the end's own face), and no
-    segment through the cluster reaches on beyond it."""
+def _real_ends(found: Clusters, b: int, axes, proj, lo_hi, cfg: TrackerConfig):
+    """(2, 2) bool [axis, low/high end], twice. First: the end is the object's, not cut off
+    by the crop (no corner within `edge_m` of it cut in its direction) and not hidden: the
+    scan saw through the water `free_step_m` beyond its corners (those at the end itself: a
+    point beyond a corner of the side next to it would lie on the end's own face), and no
+    segment through the cluster reaches on beyond it. Second, for the hull evidence
+    (`_Tracked.hull_hits`): the same, but water beyond a corner in the cluster's own
+    shadow (the far end of a hull seen from its quarter) counts as seen through: nothing
+    else hides it, where a piece of wall goes on into the wall or behind a corner."""
     hull, cut = found.hulls[b], found.cut[b]
     sign = np.array([-1.0, 1.0])
     inward = (proj.T[:, None, :] - lo_hi[:, :, None]) * sign[None, :, None]  # (2, 2, h)
@@ -661,12 +726,29 @@ def _real_ends(found: Clusters, b: int, axes, proj, lo_hi, cfg: TrackerConfig) -
     beyond = hull[h] + (sign[j] * cfg.free_step_m)[:, None] * axes[i]
     free = free_space(found, beyond, cfg.free_margin_m)
     hidden = (np.bincount(2 * i + j, ~free, minlength=4) > 0).reshape(2, 2)
+    own = ~(np.bincount(2 * i + j, ~(free | _in_shadow(hull, beyond, found.pose)),
+                        minlength=4) > 0).reshape(2, 2) if hidden.any() else ~hidden
     faces = found.faces[b] if found.faces else ()
     if len(faces):  # a face the line detector followed on beyond an end: it goes on there
         f = faces.reshape(-1, 2) @ axes.T  # (2f, 2)
-        hidden[:, 0] |= f.min(axis=0) < lo_hi[:, 0] - cfg.free_step_m
-        hidden[:, 1] |= f.max(axis=0) > lo_hi[:, 1] + cfg.free_step_m
-    return real & ~hidden
+        goes_on = np.column_stack([f.min(axis=0) < lo_hi[:, 0] - cfg.free_step_m,
+                                   f.max(axis=0) > lo_hi[:, 1] + cfg.free_step_m])
+        hidden |= goes_on
+        own &= ~goes_on
+    return real & ~hidden, real & own
+
+
+def _in_shadow(hull: np.ndarray, points: np.ndarray, pose) -> np.ndarray:
+    """(K,) bool: inertial points that lie in the shadow a convex hull (h, 2) casts seen
+    from the pose's position: strictly between its outer bearings, farther than its
+    nearest corner."""
+    d = hull - np.asarray(pose[:2], float)
+    mid = d.mean(axis=0)
+    ref = math.atan2(mid[1], mid[0])
+    ang = (np.arctan2(d[:, 1], d[:, 0]) - ref + math.pi) % (2 * math.pi) - math.pi
+    e = points - np.asarray(pose[:2], float)
+    be = (np.arctan2(e[:, 1], e[:, 0]) - ref + math.pi) % (2 * math.pi) - math.pi
+    return (be > ang.min()) & (be < ang.max()) & (np.hypot(*e.T) > np.hypot(*d.T).min())
 
 
 def _inside(k: _Tracked, xy, cfg: TrackerConfig) -> bool:

@@ -110,8 +110,9 @@ class TrackingWatch:
     in the water (`objects`, outlines: a moored boat, a pier) is a wall taken for a boat,
     moving or not;
     their number, the longest and their total time are counted. Track continuity: each
-    vessel is matched to one track a step (nearest pairs first); a change of that id is a
-    switch, and another track near a matched vessel is a duplicate (one boat as two)."""
+    vessel is matched to one track a step (the one it had while that is still within
+    `match_m` of it, else nearest pairs first); a change of that id is a switch, and another
+    track near a matched vessel is a duplicate (one boat as two)."""
 
     def __init__(self, vessels, match_m: float = 6.0, visible_m: float = 60.0, walls=(),
                  wall_m: float = 1.0, objects=(), object_m: float = 2.0):
@@ -146,6 +147,13 @@ class TrackingWatch:
         near = sorted((float(np.hypot(*(np.asarray(tr.position, float) - vp[:2]))), k, i)
                       for i, tr in enumerate(tracks) for k, (vp, _) in enumerate(truth))
         matched, taken = {}, set()
+        # A vessel keeps the track it had while that track is still on it (a second track
+        # beside it, nearer this step, is a duplicate, not a switch).
+        for dist, k, i in near:
+            if dist <= self.match_m and tracks[i].id == self._ids[k] and i not in taken \
+                    and k not in matched:
+                matched[k] = i
+                taken.add(i)
         for dist, k, i in near:
             if dist > self.match_m:
                 break

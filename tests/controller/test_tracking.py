@@ -638,3 +638,49 @@ def test_viewpoints_must_be_rows_of_x_y_height(value):
 def test_viewpoints_are_kept_once_each_in_order():
     cfg = TrackerConfig(viewpoints=[[3.5, 0, 1.3], [0, 1.35, 2.4], [3.5, 0, 1.3]])
     assert cfg.viewpoints == ((3.5, 0.0, 1.3), (0.0, 1.35, 2.4))
+
+
+# -- tracks that mean boats (issue 34) ----------------------------------------------------
+def junction() -> CanalWorld:
+    """A 20 m canal crossed by a 16 m side canal at 140-156 m: four quay corners, and the
+    side canal's walls seen through its mouths as the boat comes abeam."""
+    from scenarios.world.canal import Wall
+
+    return CanalWorld((Wall([[0, -10], [140, -10], [140, -60]], land_side="left"),
+                       Wall([[156, -60], [156, -10], [300, -10]], land_side="left"),
+                       Wall([[0, 10], [140, 10], [140, 60]], land_side="right"),
+                       Wall([[156, 60], [156, 10], [300, 10]], land_side="right")),
+                      centre_line=np.array([[0.0, 0.0], [300.0, 0.0]]))
+
+
+def test_walls_alone_make_no_track_longer_than_a_second():
+    """Past a junction's mouths and corners with no vessel about: any confirmed track is a
+    wall taken for a boat, and none lasts more than 1 s (before the hull evidence, a piece
+    of the side canal's wall seen through its mouth was a track for several seconds)."""
+    world = junction()
+    run, _ = simulate(world, [], (70.0, 0.0), 2.0, 55.0, seed=6)
+    walls = [w.points for w in world.walls]
+    on_wall: dict = {}
+    for out in run.outputs:
+        for tr in out.tracks:
+            if distance_to_polylines(tr.position, walls)[0] <= 1.0:
+                on_wall[tr.id] = on_wall.get(tr.id, 0.0) + 1.0 / RATE_HZ
+    assert max(on_wall.values(), default=0.0) <= 1.0 + 1e-9, on_wall
+
+
+def test_a_vessel_behind_a_pier_for_two_seconds_keeps_its_id():
+    """A launch crossing 40 m ahead passes behind a pier 20 m ahead (out of sight for about
+    2.5 s, longer than a confirmed track coasts): the track found again takes the lost one's
+    id, and no other id is ever on the launch."""
+    pier = Obstacle(np.array([[19.0, -2.5], [21.0, -2.5], [21.0, 2.5], [19.0, 2.5]]),
+                    z_top_m=3.0, kind="pier", name="pier")
+    world = CanalWorld.from_centre_line([[-20, 0], [100, 0]], 70.0, obstacles=(pier,))
+    launch = Vessel("launch", (40.0, -22.0), math.pi / 2, 1.5, 6.0, 2.0)
+    run, _ = simulate(world, [launch], (0.0, 0.0), 0.0, 30.0, seed=7)
+    ids = [None if (tr := track_of(out, launch, t)) is None else tr.id
+           for t, out in zip(run.times, run.outputs)]
+    hidden = [k for k, seen in enumerate(run.visible["launch"]) if not seen]
+    behind = [k for k in hidden if abs(launch.position(run.times[k])[1]) < 8.0]
+    assert len(behind) >= 20  # the pier hides it for 2 s at least
+    assert ids[behind[0] - 5] is not None and ids[-1] is not None  # tracked before and after
+    assert len({i for i in ids if i is not None}) == 1, sorted({i for i in ids if i})

@@ -211,3 +211,21 @@ def test_a_track_on_a_moored_boat_beside_the_quay_is_no_wall_track():
                      [_track(3, 30.5, 9.3, False), _track(4, 60.0, 9.5, False)], 0.1)
     out = watch.summary()
     assert out["wall_tracks"] == 1 and out["longest_wall_track_s"] == pytest.approx(2.0)
+
+
+def test_a_vessel_keeps_its_track_while_a_second_one_beside_it_is_nearer_at_times():
+    """Issue 34: two tracks on one vessel, now the one now the other nearer (a hull split in
+    two that flickers): the vessel keeps the id it had while that track stays on it, so no
+    switch; once that track has left the vessel (beyond `match_m`), the other is its track
+    and that is one switch."""
+    from scenarios.results.encounters import TrackingWatch
+
+    watch = TrackingWatch([_Stub()])
+    for k in range(40):
+        t = 0.1 * k
+        first = t + (1.5 if k % 2 else 0.2) if k < 30 else t + 20.0  # then gone off it
+        tracks = [_track(1, first, 0.0, True), _track(2, t + (0.3 if k % 2 else 1.0), 0.0, True)]
+        watch.update(t, np.array([-20.0, 0.0, 0.0]), tracks, 0.1)
+    out = watch.summary()
+    assert out["id_switches"] == {"launch": 1}
+    assert out["duplicate_tracks"] == 1 and out["longest_duplicate_s"] == pytest.approx(3.0)
