@@ -281,6 +281,7 @@ class NmpcController:
         self._rules_stop: Shaping | None = None
         self._giving_way: frozenset = frozenset()  # track ids given way to last period
         self._restart_rest = 0  # steps left before another restart from the reference
+        self._elastic: tuple | None = None  # this step's rows' violation, if a restart chose
         self._rules_clear_s = 0.0
         self._prepared: _Prepared | None = None
         self._inputs: _Inputs | None = None  # the last step's, for the next preparation
@@ -502,11 +503,11 @@ class NmpcController:
             return self._merge(result, retry), True
         self._elastic = first
         self._restart_rest = int(round(1.0 / self.config.control_period_s))
-        return SqpResult(result.w, result.ok, result.converged, result.status,
-                         result.sqp_iterations + retry.sqp_iterations,
-                         result.qp_iterations + retry.qp_iterations, result.step_norm,
-                         result.time_linearisation_s + retry.time_linearisation_s,
-                         result.time_qp_s + retry.time_qp_s), False
+        return replace(result, sqp_iterations=result.sqp_iterations + retry.sqp_iterations,
+                       qp_iterations=result.qp_iterations + retry.qp_iterations,
+                       time_linearisation_s=result.time_linearisation_s
+                       + retry.time_linearisation_s,
+                       time_qp_s=result.time_qp_s + retry.time_qp_s), False
 
     # -- pieces -----------------------------------------------------------------------------
     def _setup(self, x: np.ndarray, inputs: "_Inputs", elapsed: float,
@@ -852,8 +853,7 @@ class NmpcController:
         count in the step's total."""
         command, rates, clipped = command
         qp = getattr(self, "_qp", None)  # (IPOPT has none)
-        elastic = getattr(self, "_elastic", None) or (
-            qp.elastic() if qp is not None else (0.0, 0.0))
+        elastic = self._elastic or (qp.elastic() if qp is not None else (0.0, 0.0))
         stats = SolverStats(
             method=self.method, ok=result.ok, converged=result.converged, status=result.status,
             fallback=fallback, sqp_iterations=result.sqp_iterations,

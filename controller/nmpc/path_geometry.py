@@ -1,11 +1,10 @@
 """The compiled geometry of the NMPC's step (`path_geometry.c`): the path frame of points
 (`WaypointPath.frame`), the forced slack (`slack_reference.forced_slack_at`), the walls
-abeam (`slack_reference.walls_abeam`), the segment slots' ranking (`slot_distances`), the passage sweep's walk
-(`passage.walk_slabs`) and
-the sight lines of the blind-opening rule
-(`rays_crossing`), the largest numpy costs of a step's set-up
-after the QP. Loaded once per process; None where nothing can be compiled, and the callers
-then run their numpy twins."""
+abeam (`slack_reference.walls_abeam`), the segment slots' ranking (`slot_distances`), the
+passage sweep's walk (`passage.walk_slabs`) and the sight lines of the blind-opening rule
+(`rays_crossing`), the largest numpy costs of a step's set-up after the QP. Loaded once
+per process; None where nothing can be compiled, and the callers then run their numpy
+twins."""
 
 from __future__ import annotations
 

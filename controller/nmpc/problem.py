@@ -39,6 +39,7 @@ slots) is fixed when the problem is built.
 
 from __future__ import annotations
 
+import functools
 import math
 import numbers
 from dataclasses import dataclass, field, fields
@@ -472,9 +473,6 @@ def _stage_blocks(sparsity: ca.Sparsity, row0: int, col0: int, src0: int):
     return np.asarray(rows) + row0, np.asarray(cols) + col0, np.arange(n) + src0
 
 
-_BUILT: dict = {}  # config -> Ocp, this process's (`build_ocp`)
-
-
 def build_ocp(config: NmpcConfig) -> Ocp:
     """Variables, dynamics, constraints and their Jacobian, as CasADi Functions of (w, p).
 
@@ -482,16 +480,18 @@ def build_ocp(config: NmpcConfig) -> Ocp:
     minute's run; a study or the tests run many): the Ocp is immutable (its index arrays are
     read-only), so controllers share it."""
     try:
-        built = _BUILT.get(config)
+        hash(config)
     except TypeError:  # a config holding something unhashable: build it afresh
         return _build_ocp(config)
-    if built is None:
-        if len(_BUILT) >= 8:
-            _BUILT.clear()
-        built = _BUILT[config] = _build_ocp(config)
-        for value in vars(built).values():
-            if isinstance(value, np.ndarray):
-                value.setflags(write=False)
+    return _shared_ocp(config)
+
+
+@functools.lru_cache(maxsize=8)
+def _shared_ocp(config: NmpcConfig) -> Ocp:
+    built = _build_ocp(config)
+    for value in vars(built).values():
+        if isinstance(value, np.ndarray):
+            value.setflags(write=False)
     return built
 
 

@@ -107,15 +107,4 @@ def fill_segment_slots(segments, position, n_slots: int = 16, range_m: float = n
 
 def distance_to_segments(point: np.ndarray, segments: np.ndarray) -> np.ndarray:
     """Distance (M,) from one point to each (x_c, y_c, theta, length) segment."""
-    return _distances(np.asarray(point, float)[None, :2], segments)[0]
-
-
-def _distances(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
-    """Distance (K, M) from each point (K, 2) to each segment: the point's offset along the
-    segment, clamped to its half length, and across it."""
-    dx = points[:, 0:1] - segments[:, 0]
-    dy = points[:, 1:2] - segments[:, 1]
-    c, s = np.cos(segments[:, 2]), np.sin(segments[:, 2])
-    along = np.abs(dx * c + dy * s)
-    across = -dx * s + dy * c
-    return np.hypot(np.maximum(along - segments[:, 3] / 2, 0.0), across)
+    return slot_distances(np.asarray(point, float)[None, :2], segments)[0]

@@ -745,9 +745,9 @@ def _in_shadow(hull: np.ndarray, points: np.ndarray, pose) -> np.ndarray:
     d = hull - np.asarray(pose[:2], float)
     mid = d.mean(axis=0)
     ref = math.atan2(mid[1], mid[0])
-    ang = (np.arctan2(d[:, 1], d[:, 0]) - ref + math.pi) % (2 * math.pi) - math.pi
+    ang = wrap_angle(np.arctan2(d[:, 1], d[:, 0]) - ref)
     e = points - np.asarray(pose[:2], float)
-    be = (np.arctan2(e[:, 1], e[:, 0]) - ref + math.pi) % (2 * math.pi) - math.pi
+    be = wrap_angle(np.arctan2(e[:, 1], e[:, 0]) - ref)
     return (be > ang.min()) & (be < ang.max()) & (np.hypot(*e.T) > np.hypot(*d.T).min())
 
 
