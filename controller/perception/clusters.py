@@ -210,7 +210,7 @@ def remember_walls(memory: np.ndarray, segments: np.ndarray, time_s: float,
 
 def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "TrackerConfig",
                   known_walls=None, occluders=None, hull_returns=None, wall_cells=None,
-                  collect_wall_points: bool = False) -> Clusters:
+                  collect_wall_points: bool = False, outlines=None) -> Clusters:
     """The clusters among cropped body-frame points `xy_body` (N, 2) that no wall segment
     (inertial (M, 4), from the same scan) explains, placed with `pose` (x, y, psi).
     `occluders` (K, 2): body-frame points of every return that can hide something (the crop
@@ -219,7 +219,9 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
     `known_walls` (K, 4+): wall lines of earlier scans (`remember_walls`); a segment or a
     cluster lying along one is that wall too. `wall_cells` (`wall_cells.WallCells`): where
     walls were seen; a cluster mostly in those cells is wall. `collect_wall_points`: return
-    the confident walls' returns (inertial) in `wall_points`, for that memory."""
+    the confident walls' returns (inertial) in `wall_points`, for that memory.
+    `outlines` (T, 5): inertial (x, y, axis, length, width) of vessels predicted now; a
+    component that two or more of them claim is split between them (`split_by_outlines`)."""
     cv2 = opencv.cv2()
     det = cfg.detection
     x0, y0, psi = (float(v) for v in pose)
@@ -275,11 +277,28 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
     side_angle = _side_angles(segments[~walls], labels, n_labels, (x0, y0, c, s, psi), cfg)
     frame = (x0, y0, c, s, psi)
     centre, angle, size, counts, hulls, edges, from_side, faces = [], [], [], [], [], [], [], []
+    rot = np.array([[c, s], [-s, c]])  # row vectors: p_inertial = p_body @ rot + (x0, y0)
+    pieces = []  # (body-frame points, side angle or NaN, faces, the angle is a side's)
     for k, a in zip(good.tolist(), first.tolist()):
         pts = xy[order[a:a + count[k]]]
+        parts = None
+        if outlines is not None and len(outlines) > 1:
+            parts = split_by_outlines(pts @ rot + (x0, y0), outlines, cfg)
+        if parts is None:
+            theta = side_angle[k]
+            pieces.append((pts, theta, face_of.get(k, _NO_FACES), not math.isnan(theta)))
+            continue
+        ends_k = face_of.get(k, _NO_FACES)
+        face_part = (_box_distance(ends_k.mean(axis=1), outlines[parts[1]]).argmin(axis=1)
+                     if len(ends_k) else np.zeros(0, int))
+        for m, o in enumerate(parts[1]):  # each on its own vessel's axis (body frame)
+            pieces.append((pts[parts[0] == m], _half_turn_angle(outlines[o, 2] - psi),
+                           ends_k[face_part == m], False))
+    for pts, theta, face_k, side in pieces:
+        if len(pts) < cfg.min_points:
+            continue
         hull = cv2.convexHull(np.ascontiguousarray(pts, np.float32)).reshape(-1, 2).astype(float)
-        theta = side_angle[k]
-        from_side.append(not math.isnan(theta))
+        from_side.append(side)
         if math.isnan(theta):  # no face long enough for a segment: the principal axis
             cov = np.cov(pts.T) if len(pts) > 2 else np.eye(2)
             theta = 0.5 * math.atan2(2 * cov[0, 1], cov[0, 0] - cov[1, 1])
@@ -299,17 +318,16 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
                                      (x0, y0), wall_lines):
             from_side.pop()
             continue  # a piece of wall
-        faces.append(face_of.get(k, _NO_FACES))
+        faces.append(face_k)
         centre.append(mid)
         angle.append(theta)
         size.append((lu, lv))
-        counts.append(int(count[k]))
+        counts.append(len(pts))
         hulls.append(hull)
     if hulls:  # (all hulls' corners at once, then split)
         split = np.cumsum([len(h) for h in hulls])[:-1]
         edges = np.split(_at_edge(np.concatenate(hulls), cfg), split)
     # To the inertial frame.
-    rot = np.array([[c, s], [-s, c]])  # row vectors: p_inertial = p_body @ rot + (x0, y0)
     origin = np.array([x0, y0])
     centre = np.asarray(centre, float).reshape(-1, 2) @ rot + origin
     angle = (np.asarray(angle, float) + psi + np.pi / 2) % np.pi - np.pi / 2
@@ -319,6 +337,61 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
                     np.asarray(counts, int), hulls, tuple(edges), walls,
                     xy_body if occluders is None else occluders, (x0, y0, psi), tuple(faces),
                     *_viewpoints(cfg, hull_returns), wall_points)
+
+
+def split_by_outlines(points: np.ndarray, outlines: np.ndarray, cfg: "TrackerConfig"):
+    """Two vessels passing close make one component (their hulls a cell or two apart, or
+    a segment through both): a track started on it would hold both, and each vessel's own
+    track would lose it. If two or more of the predicted `outlines` (T, 5: x, y, axis,
+    length, width, inertial), apart from each other, each hold `min_points` of the
+    component's inertial `points` (N, 2) within a cell, each point goes to the outline it
+    lies nearest: (part of each point (N,), the outlines' rows, one per part); else None."""
+    d = _box_distance(points, outlines)  # (N, T)
+    held = np.flatnonzero((d <= cfg.cell_m).sum(axis=0) >= cfg.min_points)
+    if len(held) < 2:
+        return None
+    apart = [held[0]]  # (a duplicate track over the same vessel does not split it)
+    for o in held[1:].tolist():
+        if all(_boxes_apart(outlines[o], outlines[q], cfg.cell_m) for q in apart):
+            apart.append(o)
+    if len(apart) < 2:
+        return None
+    apart = np.array(apart)
+    return d[:, apart].argmin(axis=1), apart
+
+
+def _box_distance(points: np.ndarray, outlines: np.ndarray) -> np.ndarray:
+    """(N, T) distance of each point (N, 2) outside each box (T, 5: x, y, axis, length,
+    width), the Chebyshev way on the box's axes (negative inside)."""
+    c, s = np.cos(outlines[:, 2]), np.sin(outlines[:, 2])
+    dx = points[:, 0:1] - outlines[:, 0]
+    dy = points[:, 1:2] - outlines[:, 1]
+    return np.maximum(np.abs(c * dx + s * dy) - 0.5 * outlines[:, 3],
+                      np.abs(-s * dx + c * dy) - 0.5 * outlines[:, 4])
+
+
+def _boxes_apart(a: np.ndarray, b: np.ndarray, shrink_m: float) -> bool:
+    """Whether two boxes (x, y, axis, length, width), each less `shrink_m` a side, do not
+    overlap (separating axes: the four sides' directions)."""
+    def corners(o):
+        u = np.array([math.cos(o[2]), math.sin(o[2])])
+        v = np.array([-u[1], u[0]])
+        hl, hw = max(0.5 * o[3] - shrink_m, 0.0), max(0.5 * o[4] - shrink_m, 0.0)
+        return np.array([o[:2] + i * hl * u + j * hw * v for i in (-1, 1) for j in (-1, 1)])
+
+    ca, cb = corners(a), corners(b)
+    for o in (a, b):
+        for ang in (o[2], o[2] + math.pi / 2):
+            n = np.array([math.cos(ang), math.sin(ang)])
+            pa, pb = ca @ n, cb @ n
+            if pa.max() < pb.min() or pb.max() < pa.min():
+                return True
+    return False
+
+
+def _half_turn_angle(theta: float) -> float:
+    """An undirected axis' direction in [-pi/2, pi/2)."""
+    return (theta + math.pi / 2) % math.pi - math.pi / 2
 
 
 def sociable_points_numpy(xy: np.ndarray, r: float, cell: float, n: int, walls=None,

@@ -442,7 +442,7 @@ class VesselTracker:
         occluders, xy, hull = split_crop(cloud, cfg)
         collect = wall_cells.due(self._cells, t, cfg.wall_cells_every_s)
         found = find_clusters(xy, p, segs, cfg, self._walls, occluders, hull, self._cells,
-                              collect)
+                              collect, self._outlines())
         if collect:
             self._cells = wall_cells.remember(self._cells, found.wall_points, t,
                                               cfg.wall_cells_m, cfg.wall_cells_memory_s)
@@ -451,6 +451,13 @@ class VesselTracker:
         self._associate(t, found, p)
         self._end_of_life(t, p, scanned=True)
         return self._output(t, segs, len(found), "ok")
+
+    def _outlines(self) -> np.ndarray:
+        """(T, 5) x, y, axis, length, width of the confirmed moving tracks, predicted to
+        this scan: a cluster two of them claim is split between them (`find_clusters`),
+        not taken for one vessel the size of both."""
+        return np.array([(*k.kf.x[:2], k.axis, *k.extent) for k in self._tracks
+                         if k.moving and not math.isnan(k.confirmed_s)]).reshape(-1, 5)
 
     # -- one scan ---------------------------------------------------------------------
     def _associate(self, t: float, found: Clusters, pose) -> None:
@@ -479,22 +486,10 @@ class VesselTracker:
         if meas:
             rows, cols = linear_sum_assignment(np.where(np.isfinite(cost), cost, 1e9))
             for a, b in zip(rows.tolist(), cols.tolist()):
-                if (a, b) not in meas:
-                    continue
-                k = self._tracks[a]
-                realigned = k.align(float(found.angle[b]), bool(found.from_side[b]), cfg)
-                if realigned:
-                    k.extent = np.array([cfg.prior_length_m, cfg.prior_width_m])
-                    k.extent = np.maximum(k.extent, _seen(k.axis, found.hulls[b]))
-                z, r, extent, shift, box = (_measure(k, found, b, sensor, cfg) if realigned
-                                            else meas[a, b])
-                if realigned:  # new axes, new extents: the centre is where they put it
-                    shift = z - k.kf.x[:2]
-                k.update(t, z, r, extent, shift, box[2], cfg)
-                if box[3]:
-                    k.hull_hits, k.hull_s = k.hull_hits + 1, t
-                k.seen_box = box
-                used[b] = True
+                if (a, b) in meas:
+                    self._hit(t, self._tracks[a], found, b, meas[a, b], sensor)
+                    used[b] = True
+        self._manoeuvres(t, found, used, sensor)
         for k in self._tracks:
             if k.seen_box is None:
                 k.misses += 1
@@ -508,6 +503,47 @@ class VesselTracker:
         for b in np.flatnonzero(~used).tolist():
             if not any(_inside(k, found.centre[b], cfg) for k in self._tracks):
                 self._birth(t, found, b, sensor)
+
+    def _hit(self, t: float, k: _Tracked, found: Clusters, b: int, m, sensor) -> None:
+        """Update track k with cluster b, measured `m` (`_measure`)."""
+        cfg = self.config
+        realigned = k.align(float(found.angle[b]), bool(found.from_side[b]), cfg)
+        if realigned:
+            k.extent = np.array([cfg.prior_length_m, cfg.prior_width_m])
+            k.extent = np.maximum(k.extent, _seen(k.axis, found.hulls[b]))
+        z, r, extent, shift, box = _measure(k, found, b, sensor, cfg) if realigned else m
+        if realigned:  # new axes, new extents: the centre is where they put it
+            shift = z - k.kf.x[:2]
+        k.update(t, z, r, extent, shift, box[2], cfg)
+        if box[3]:
+            k.hull_hits, k.hull_s = k.hull_hits + 1, t
+        k.seen_box = box
+
+    def _manoeuvres(self, t: float, found: Clusters, used: np.ndarray, sensor) -> None:
+        """A confirmed moving track the gate left without a cluster, with one left over
+        inside its predicted outline: the vessel turned (at a bend, the axis and velocity
+        went stale) and the anchored measure missed the gate; that cluster could start no
+        track (`_birth`), so the track coasted to its death. It takes the nearest such
+        cluster, its covariance first scaled so that the residual lies on the gate (fading
+        memory: the velocity follows the turn)."""
+        cfg = self.config
+        for k in self._tracks:
+            if k.seen_box is not None or not k.moving or math.isnan(k.confirmed_s):
+                continue
+            best, best_d2 = None, math.inf
+            for b in np.flatnonzero(~used).tolist():
+                if not _inside(k, found.centre[b], cfg) or any(
+                        o is not k and _inside(o, found.centre[b], cfg) for o in self._tracks):
+                    continue
+                m = _measure(k, found, b, sensor, cfg)
+                d2 = _mahalanobis2(m[0] - (k.kf.x[:2] + m[3]), k.kf.P[:2, :2] + m[1])
+                if d2 < best_d2:
+                    best, best_d2 = (b, m), d2
+            if best is None:
+                continue
+            k.kf.P = k.kf.P * max(best_d2 / cfg.gate_chi2, 1.0)
+            self._hit(t, k, found, best[0], best[1], sensor)
+            used[best[0]] = True
 
     def _birth(self, t: float, found: Clusters, b: int, sensor) -> None:
         cfg = self.config
