@@ -88,6 +88,9 @@ class TrackerConfig:
     anchor_sigma_m: float = 0.2  # more, where the centre is half an extent from one end
     init_speed_sigma_mps: float = 2.0  # a new track's velocity (0 +- this)
     gate_chi2: float = 13.8  # Mahalanobis gate (99.9 % of chi-square, 2 dof)
+    # A moving track that the gate left without a cluster takes one that fits inside its
+    # predicted outline up to this far out (a turn: `VesselTracker._manoeuvres`).
+    manoeuvre_chi2: float = 69.0
     full_view_m: float = 0.5  # seen within this of the extent: both ends are in view
     extent_growth_m: float = 1.0  # the extent grows by at most this per scan (merges)
     prior_length_m: float = 3.0  # a small boat's extent until more is seen
@@ -521,23 +524,27 @@ class VesselTracker:
 
     def _manoeuvres(self, t: float, found: Clusters, used: np.ndarray, sensor) -> None:
         """A confirmed moving track the gate left without a cluster, with one left over
-        inside its predicted outline: the vessel turned (at a bend, the axis and velocity
-        went stale) and the anchored measure missed the gate; that cluster could start no
-        track (`_birth`), so the track coasted to its death. It takes the nearest such
-        cluster, its covariance first scaled so that the residual lies on the gate (fading
-        memory: the velocity follows the turn)."""
+        inside its predicted outline, no bigger than the vessel (a part of it) and not cut
+        off by the crop (the own hull's box, the range: its ends say less than they seem): the
+        vessel turned (at a bend, the axis and velocity went stale) and the anchored measure
+        missed the gate; that cluster could start no track (`_birth`), so the track coasted
+        to its death. It takes the nearest such cluster within `manoeuvre_chi2`, its
+        covariance first scaled so that the residual lies on the gate (fading memory: the
+        velocity follows the turn)."""
         cfg = self.config
         for k in self._tracks:
             if k.seen_box is not None or not k.moving or math.isnan(k.confirmed_s):
                 continue
-            best, best_d2 = None, math.inf
+            best, best_d2 = None, cfg.manoeuvre_chi2
+            fits = np.sort(k.extent)[::-1] + cfg.extent_growth_m  # long side, short side
             for b in np.flatnonzero(~used).tolist():
-                if not _inside(k, found.centre[b], cfg) or any(
+                if not _inside(k, found.centre[b], cfg) or (found.size[b] > fits).any() \
+                        or found.cut[b].any() or any(
                         o is not k and _inside(o, found.centre[b], cfg) for o in self._tracks):
                     continue
                 m = _measure(k, found, b, sensor, cfg)
                 d2 = _mahalanobis2(m[0] - (k.kf.x[:2] + m[3]), k.kf.P[:2, :2] + m[1])
-                if d2 < best_d2:
+                if d2 <= best_d2:
                     best, best_d2 = (b, m), d2
             if best is None:
                 continue

@@ -710,11 +710,11 @@ def test_two_vessels_passing_close_stay_two_tracks():
 
 
 def test_a_vessel_that_turns_keeps_its_track():
-    """A boat that turns 25 degrees at once (a route's corner at a bend), seen bow-on from
+    """A boat that turns 10 degrees at once (a route's corner at a bend), seen bow-on from
     dead ahead: the anchored measures leave its gate, and the cluster, inside its predicted
     outline, starts no track. Taken with the covariance grown (a manoeuvre), the track
     follows the turn and keeps its id."""
-    turn_s, turn = 3.0, math.radians(25.0)
+    turn_s, turn = 3.0, math.radians(10.0)
     start, speed = np.array([40.0, 0.0]), 2.0
 
     def at(t):
