@@ -17,7 +17,8 @@
 A component longer than any vessel, or lying along a wall's line, is a piece of wall, not a
 detection. Points closer than `cell_m` * 2 are always in one cluster, points farther than
 `cell_m` * 4 never are (unless a segment joins them), so two vessels side by side a few
-metres apart stay two.
+metres apart stay two; closer, a component that the tracker's predicted outlines of two
+vessels claim is split between them (`split_by_outlines`).
 """
 
 from __future__ import annotations

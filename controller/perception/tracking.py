@@ -7,7 +7,11 @@ linear_sum_assignment`) on the Mahalanobis distance, gated; a matched track is u
 unmatched cluster starts a tentative track, confirmed after `confirm_hits` hits within its
 first `confirm_window` scans once it shows a hull (below); a track dies after `max_misses`
 scans or `max_coast_s` unseen, or when it leaves the view; one confirmed where a confirmed
-track died lately takes that one's id (`_reacquire`).
+track died lately takes that one's id (`_reacquire`). Two vessels passing close make one
+cluster: one that two moving tracks' predicted outlines claim is split between them
+(`clusters.split_by_outlines`). A moving track whose vessel turned (a route's corner) has
+its anchored measure fall outside the gate: a cluster that fits inside its outline is taken
+all the same, with the covariance grown (`_manoeuvres`).
 
 What a cluster measures. The points lie on the faces turned to the sensor, so the box around
 them is partial: an L, a line, a bow alone. The tracker keeps the vessel's extent along and
