@@ -32,6 +32,8 @@ from .slack_reference import forced_slack
 from .vessel_slots import predict_vessels
 
 METHODS = ("rti", "sqp", "ipopt")
+STUCK_SQP_ITERATIONS = 10
+"""SQP iterations of a restart for a boat held at rest (`NmpcController._stuck`)."""
 PLAUSIBLE_TOL = 1e-3
 """How far past its bounds a solved plan may lie before it counts as garbage."""
 
@@ -309,6 +311,7 @@ class NmpcController:
         self._rules_stop: Shaping | None = None
         self._giving_way: frozenset = frozenset()  # track ids given way to last period
         self._restart_rest = 0  # steps left before another restart from the reference
+        self._stuck_s = 0.0  # how long the plan has held the boat at rest (`_stuck`)
         self._elastic: tuple | None = None  # this step's rows' violation, if a restart chose
         self._rules_clear_s = 0.0
         self._prepared: _Prepared | None = None
@@ -474,7 +477,8 @@ class NmpcController:
         restarted = False
         self._elastic = None  # (the QP's own, unless a restart chose between two)
         if result.ok and not from_safe_guess:
-            result, restarted = self._restart_if_elastic(result, x_init, reference, setup)
+            result, restarted = self._restart_if_elastic(result, x_init, reference, setup,
+                                                         elapsed)
         if not result.ok and not from_safe_guess:
             retry = self._solve(self._safe_guess(x_init, reference, setup.slack_ref), p, w_ref,
                                 lbw, ubw)
@@ -504,28 +508,42 @@ class NmpcController:
                 setup.stop, setup.vessel_sel, setup.rules, fed_back, set_up,
                 prepared is not None, restarted)
 
-    def _restart_if_elastic(self, result: SqpResult, x_init, reference, setup):
+    def _restart_if_elastic(self, result: SqpResult, x_init, reference, setup,
+                            elapsed_s: float):
         """RTI follows the plan it has: one that passes a vessel on the wrong side of its
         predicted hull (ahead of a kayak crossing, not stopping short as the rules ask) stays
         that plan step after step, breaking obstacle rows by more and more. Where the QP's
         rows broke by more than `restart_elastic_h`, the step is solved again from the
         reference (the rules' plan, `_safe_guess`) and the one that breaks them less (by at
-        least half) is kept: (result, whether it was the restart's)."""
-        limit = self.config.restart_elastic_h
+        least half) is kept. A plan can also hold the boat at rest for good, the way on
+        beside a stopped kayak needing a swing no single step from it finds: after
+        `restart_stuck_s` of that, SQP to convergence from the reference, kept where it goes
+        further and breaks the rows no more. (result, whether it was the restart's)."""
+        c = self.config
         qp = getattr(self, "_qp", None)
-        if not limit or qp is None:
+        if qp is None or not (c.restart_elastic_h or c.restart_stuck_s):
             return result, False
         first = qp.elastic()
-        if max(first) <= limit:
+        stuck = bool(c.restart_stuck_s) and self._stuck(result.w, x_init, reference, setup,
+                                                        elapsed_s)
+        broken = bool(c.restart_elastic_h) and max(first) > c.restart_elastic_h
+        if not (broken or stuck):
             return result, False
         if self._restart_rest > 0:  # the last restart did no better: not again for a second
             self._restart_rest -= 1
             return result, False
-        retry = self._solve(self._safe_guess(x_init, reference, setup.slack_ref), setup.p,
-                            setup.w_ref, setup.lbw, setup.ubw)
+        guess = self._safe_guess(x_init, reference, setup.slack_ref)
+        if broken:
+            retry = self._solve(guess, setup.p, setup.w_ref, setup.lbw, setup.ubw)
+        else:
+            retry = sqp(self._qp, guess, setup.p, setup.w_ref, setup.lbw, setup.ubw,
+                        STUCK_SQP_ITERATIONS, self.sqp_tol)
         second = qp.elastic()
-        if retry.ok and max(second) < 0.5 * max(first):
+        if retry.ok and (max(second) < 0.5 * max(first) if broken else
+                         max(second) <= max(first) + 1e-9
+                         and self._travel(retry.w) > self._travel(result.w) + 1.0):
             self._elastic = second
+            self._stuck_s = 0.0
             return self._merge(result, retry), True
         self._elastic = first
         self._restart_rest = int(round(1.0 / self.config.control_period_s))
@@ -534,6 +552,23 @@ class NmpcController:
                        time_linearisation_s=result.time_linearisation_s
                        + retry.time_linearisation_s,
                        time_qp_s=result.time_qp_s + retry.time_qp_s), False
+
+    def _travel(self, w: np.ndarray) -> float:
+        """How far a plan goes: from x_0 to x_N, straight."""
+        at = self._xy_at
+        return float(np.hypot(*(w[at[-1]] - w[at[0]])))
+
+    def _stuck(self, w, x_init, reference, setup, elapsed_s: float) -> bool:
+        """The plan has held the boat at rest (under 0.2 m/s) for `restart_stuck_s`, going
+        less than a quarter of the reference's way over the horizon, while the reference
+        asks for more than 0.5 m/s and nothing asks the boat to wait."""
+        want = float(reference.states[-1, 3])
+        if (setup.stop is None and x_init[3] < 0.2 and want > 0.5
+                and self._travel(w) < 0.25 * want * self.config.horizon * self.config.step_s):
+            self._stuck_s += elapsed_s
+        else:
+            self._stuck_s = 0.0
+        return self._stuck_s >= self.config.restart_stuck_s
 
     # -- pieces -----------------------------------------------------------------------------
     def _setup(self, x: np.ndarray, inputs: "_Inputs", elapsed: float,
