@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..kernels import pointer
 
 INSTALL_HINT = ("install it beside the project (never into its environment): pip install "
                 "--no-deps --target {dir} comma-deps-acados")
@@ -259,9 +260,7 @@ class LeanDriver:
         self._qp_iter = ctypes.c_int(0)
         self._qp_iter_ptr = ctypes.cast(ctypes.pointer(self._qp_iter), vp)
 
-    @staticmethod
-    def ptr(a: np.ndarray) -> int:
-        return a.__array_interface__["data"][0]
+    ptr = staticmethod(pointer)  # an array's address, as canalnav's kernels get it
 
     def params(self, stage: int, values: np.ndarray) -> None:
         self._set_p(self._capsule, stage, self.ptr(values), values.size)

@@ -13,6 +13,7 @@ the caller must stop the boat.
 from __future__ import annotations
 
 import math
+import operator
 import time
 from dataclasses import dataclass, replace
 from typing import NamedTuple
@@ -31,6 +32,10 @@ from .slack_reference import forced_slack
 from .vessel_slots import predict_vessels
 
 METHODS = ("rti", "sqp", "ipopt")
+STUCK_SQP_ITERATIONS = 10
+"""SQP iterations of a restart for a boat held at rest (`NmpcController._stuck`)."""
+PLAUSIBLE_TOL = 1e-3
+"""How far past its bounds a solved plan may lie before it counts as garbage."""
 
 
 @dataclass(frozen=True)
@@ -117,10 +122,23 @@ class _Inputs(NamedTuple):
     key: tuple
 
     @staticmethod
-    def of(segs, vessels, path, speed, current, bias, blind) -> "_Inputs":
-        """Copies of the arrays (a caller may refill its own in place for the next step)."""
-        segs, current, bias = np.array(segs), current.copy(), bias.copy()
-        key = (segs.shape, segs.tobytes(), current.tobytes(), bias.tobytes(), speed, blind,
+    def of(segs, vessels, path, speed, current, bias, blind,
+           known: "_Inputs | None" = None) -> "_Inputs":
+        """Copies of the arrays (a caller may refill its own in place for the next step);
+        `known`: earlier inputs whose segments `segs` is (already a copy, its bytes known),
+        themselves when all the rest is equal too (the prepared step's: no copies, no key)."""
+        if known is not None and segs is known.segs:
+            if (path is known.path and speed == known.speed and blind == known.blind
+                    and len(vessels) == len(known.vessels)
+                    and all(map(operator.is_, vessels, known.vessels))
+                    and current.tobytes() == known.key[2] and bias.tobytes() == known.key[3]):
+                return known
+            seg_bytes = known.key[1]
+        else:
+            segs = np.array(segs)
+            seg_bytes = segs.tobytes()
+        current, bias = current.copy(), bias.copy()
+        key = (segs.shape, seg_bytes, current.tobytes(), bias.tobytes(), speed, blind,
                id(path), tuple(map(id, vessels)))
         return _Inputs(segs, vessels, path, speed, current, bias, blind, key)
 
@@ -175,8 +193,12 @@ def steady_throttle(speed_mps, boat) -> np.ndarray:
 
 def _finite_vector(value, size: int, what: str) -> np.ndarray:
     if type(value) is np.ndarray and value.shape == (size,) and value.dtype == np.float64:
-        if np.isfinite(value).all():  # the common case, in a fifth of the time
-            return value  # as np.asarray would: the same array
+        if math.isfinite(sum(value.tolist())):  # the common case, in a sixth of the time
+            return value  # (a NaN or an infinity makes the sum one; so may an overflow,
+            # which the check below then clears) as np.asarray would: the same array
+    elif type(value) is tuple and len(value) == size and all(type(v) is float for v in value):
+        if math.isfinite(sum(value)):  # (the defaults: tuples of floats)
+            return np.array(value)
     try:
         arr = np.asarray(value, float)
     except (TypeError, ValueError):
@@ -228,6 +250,10 @@ class NmpcController:
         self._layout = ParamLayout.of(config)
         self._params = pack_params(config, np.zeros((config.segment_slots, len(SLOT_FIELDS))))
         self._lbw, self._ubw = self.ocp.bounds(np.zeros(NX_BOAT))
+        # the plausible plan's box (`_plausible`), all but x_0 fixed (the steps' bounds are
+        # these, x_0's set to the state, which a plan's x_0 then equals): for the feedback
+        self._plausible_lo, self._plausible_hi = self._lbw - PLAUSIBLE_TOL, self._ubw + PLAUSIBLE_TOL
+        self._plausible_lo[:NX_BOAT], self._plausible_hi[:NX_BOAT] = -np.inf, np.inf
         self._x0_at = self.ocp.states_at[0]
         self._xy_at = self.ocp.states_at[:, :2]
         self._ref_at = self.ocp.states_at[:, :NX_BOAT]
@@ -255,10 +281,14 @@ class NmpcController:
         self._act_hi = -self._act_lo
         self._rate_max = np.array([config.dnT_max, config.dnS_max])
         self._rate_max_f, self._act_hi_f = self._rate_max.tolist(), self._act_hi.tolist()
-        self._x0_boat = self._x0_at[:NX_BOAT]
+        self._x0_boat = slice(0, NX_BOAT)  # x_0 leads w (`_start_at`): slices index in a
+        # third of the time of index arrays
+        assert (self._x0_at[:NX_BOAT] == np.arange(NX_BOAT)).all()
         self._x1_xy_at = self.ocp.states_at[1:, :2]
         self._xy_buffer = np.zeros((config.horizon + 1, 2))
-        self._u0_rates = self.ocp.inputs_at[0, :2]
+        u0 = self.ocp.inputs_at[0]
+        self._u0_rates = slice(int(u0[0]), int(u0[0]) + 2)
+        assert (u0[:2] == np.arange(u0[0], u0[0] + 2)).all()
         self._states_boat_at = self.ocp.states_at[:, :NX_BOAT]
         self._inputs_rates_at = self.ocp.inputs_at[:, :2]
         self._stages = np.arange(1, config.horizon + 1, dtype=float)
@@ -281,6 +311,7 @@ class NmpcController:
         self._rules_stop: Shaping | None = None
         self._giving_way: frozenset = frozenset()  # track ids given way to last period
         self._restart_rest = 0  # steps left before another restart from the reference
+        self._stuck_s = 0.0  # how long the plan has held the boat at rest (`_stuck`)
         self._elastic: tuple | None = None  # this step's rows' violation, if a restart chose
         self._rules_clear_s = 0.0
         self._prepared: _Prepared | None = None
@@ -402,13 +433,13 @@ class NmpcController:
                 and segments.shape == segs.shape and segments.tobytes() == segs.tobytes()):
             segs = check_segments(segments)  # (the prepared ones were checked)
         inputs = _Inputs.of(segs, _moving(vessels), self._path, speed, current, bias,
-                            bool(blind))
+                            bool(blind), None if prepared is None else prepared.inputs)
         if prepared is not None and prepared.elapsed_s == elapsed:
             guess = prepared.guess
         else:
             prepared, guess = None, self._shifted_plan(elapsed)
         if guess is not None:
-            x[2] = _unwrap_near(float(x[2]), float(guess[self._x0_at[2]]))
+            x[2] = _unwrap_near(x.item(2), guess.item(2))  # (x_0 leads w)
         x_init = np.concatenate([x, act])
 
         fallback = ""
@@ -424,8 +455,7 @@ class NmpcController:
             setup.lbw[self._x0_boat] = setup.ubw[self._x0_boat] = x_init
             start = self._start_at(guess, x_init)  # the prepared QP's w but for x_0, and
             # its parameters: nothing to check
-            result, fed_back = self._feed_back(start, setup.p, None, setup.lbw,
-                                               setup.ubw), True
+            result, fed_back = self._feed_back(start, setup.p, None), True
         else:
             setup = self._setup(x, inputs, elapsed, guess, self._buffers[0])
             setup.lbw[self._x0_boat] = setup.ubw[self._x0_boat] = x_init
@@ -436,8 +466,7 @@ class NmpcController:
             else:
                 start = self._start_at(guess, x_init)
                 if prepared is not None and self._qp.can_feed_back(start, setup.p):
-                    result, fed_back = self._feed_back(start, setup.p, setup.w_ref, setup.lbw,
-                                                       setup.ubw), True
+                    result, fed_back = self._feed_back(start, setup.p, setup.w_ref), True
                 else:
                     result = self._solve(start, setup.p, setup.w_ref, setup.lbw, setup.ubw)
         self._inputs = inputs
@@ -448,7 +477,8 @@ class NmpcController:
         restarted = False
         self._elastic = None  # (the QP's own, unless a restart chose between two)
         if result.ok and not from_safe_guess:
-            result, restarted = self._restart_if_elastic(result, x_init, reference, setup)
+            result, restarted = self._restart_if_elastic(result, x_init, reference, setup,
+                                                         elapsed)
         if not result.ok and not from_safe_guess:
             retry = self._solve(self._safe_guess(x_init, reference, setup.slack_ref), p, w_ref,
                                 lbw, ubw)
@@ -478,28 +508,42 @@ class NmpcController:
                 setup.stop, setup.vessel_sel, setup.rules, fed_back, set_up,
                 prepared is not None, restarted)
 
-    def _restart_if_elastic(self, result: SqpResult, x_init, reference, setup):
+    def _restart_if_elastic(self, result: SqpResult, x_init, reference, setup,
+                            elapsed_s: float):
         """RTI follows the plan it has: one that passes a vessel on the wrong side of its
         predicted hull (ahead of a kayak crossing, not stopping short as the rules ask) stays
         that plan step after step, breaking obstacle rows by more and more. Where the QP's
         rows broke by more than `restart_elastic_h`, the step is solved again from the
         reference (the rules' plan, `_safe_guess`) and the one that breaks them less (by at
-        least half) is kept: (result, whether it was the restart's)."""
-        limit = self.config.restart_elastic_h
+        least half) is kept. A plan can also hold the boat at rest for good, the way on
+        beside a stopped kayak needing a swing no single step from it finds: after
+        `restart_stuck_s` of that, SQP to convergence from the reference, kept where it goes
+        further and breaks the rows no more. (result, whether it was the restart's)."""
+        c = self.config
         qp = getattr(self, "_qp", None)
-        if not limit or qp is None:
+        if qp is None or not (c.restart_elastic_h or c.restart_stuck_s):
             return result, False
         first = qp.elastic()
-        if max(first) <= limit:
+        stuck = bool(c.restart_stuck_s) and self._stuck(result.w, x_init, reference, setup,
+                                                        elapsed_s)
+        broken = bool(c.restart_elastic_h) and max(first) > c.restart_elastic_h
+        if not (broken or stuck):
             return result, False
         if self._restart_rest > 0:  # the last restart did no better: not again for a second
             self._restart_rest -= 1
             return result, False
-        retry = self._solve(self._safe_guess(x_init, reference, setup.slack_ref), setup.p,
-                            setup.w_ref, setup.lbw, setup.ubw)
+        guess = self._safe_guess(x_init, reference, setup.slack_ref)
+        if broken:
+            retry = self._solve(guess, setup.p, setup.w_ref, setup.lbw, setup.ubw)
+        else:
+            retry = sqp(self._qp, guess, setup.p, setup.w_ref, setup.lbw, setup.ubw,
+                        STUCK_SQP_ITERATIONS, self.sqp_tol)
         second = qp.elastic()
-        if retry.ok and max(second) < 0.5 * max(first):
+        if retry.ok and (max(second) < 0.5 * max(first) if broken else
+                         max(second) <= max(first) + 1e-9
+                         and self._travel(retry.w) > self._travel(result.w) + 1.0):
             self._elastic = second
+            self._stuck_s = 0.0
             return self._merge(result, retry), True
         self._elastic = first
         self._restart_rest = int(round(1.0 / self.config.control_period_s))
@@ -508,6 +552,23 @@ class NmpcController:
                        time_linearisation_s=result.time_linearisation_s
                        + retry.time_linearisation_s,
                        time_qp_s=result.time_qp_s + retry.time_qp_s), False
+
+    def _travel(self, w: np.ndarray) -> float:
+        """How far a plan goes: from x_0 to x_N, straight."""
+        at = self._xy_at
+        return float(np.hypot(*(w[at[-1]] - w[at[0]])))
+
+    def _stuck(self, w, x_init, reference, setup, elapsed_s: float) -> bool:
+        """The plan has held the boat at rest (under 0.2 m/s) for `restart_stuck_s`, going
+        less than a quarter of the reference's way over the horizon, while the reference
+        asks for more than 0.5 m/s and nothing asks the boat to wait."""
+        want = float(reference.states[-1, 3])
+        if (setup.stop is None and x_init[3] < 0.2 and want > 0.5
+                and self._travel(w) < 0.25 * want * self.config.horizon * self.config.step_s):
+            self._stuck_s += elapsed_s
+        else:
+            self._stuck_s = 0.0
+        return self._stuck_s >= self.config.restart_stuck_s
 
     # -- pieces -----------------------------------------------------------------------------
     def _setup(self, x: np.ndarray, inputs: "_Inputs", elapsed: float,
@@ -687,25 +748,27 @@ class NmpcController:
         out[free[: len(rest)]] = slots[rest]
         return out
 
-    def _feed_back(self, w, p, w_ref, lbw, ubw) -> SqpResult:
+    def _feed_back(self, w, p, w_ref) -> SqpResult:
         """The RTI step on the prepared QP: what `_solve` gives for RTI, but for the
-        linearisation done in `prepare`."""
+        linearisation done in `prepare` (the bounds are the OCP's, x_0's those of w)."""
         r = self._qp.feedback(w, p, w_ref)
         if not r.ok:
             return SqpResult(w, False, False, f"QP failed ({r.status})", 1,
                              max(r.qp_iterations, 0), np.inf, r.time_linearisation_s,
                              r.time_qp_s)
         new = w + r.dw
-        norm = float(np.abs(r.dw).max())
-        result = SqpResult(new, True, norm < self.sqp_tol, r.status, 1, max(r.qp_iterations, 0),
-                           norm, r.time_linearisation_s, r.time_qp_s)
-        if not self._plausible(new, lbw, ubw):
+        norm = float(np.abs(r.dw).max()) if r.step_norm is None else r.step_norm  # NaN or
+        # infinite when an entry of dw is
+        if not (math.isfinite(norm) and (new >= self._plausible_lo).all()
+                and (new <= self._plausible_hi).all()):  # `_plausible` (w, dw finite)
             return SqpResult(w, False, False, "implausible solution (bounds violated)", 1,
-                             result.qp_iterations, norm, r.time_linearisation_s, r.time_qp_s)
-        return result
+                             max(r.qp_iterations, 0), norm, r.time_linearisation_s,
+                             r.time_qp_s)
+        return SqpResult(new, True, norm < self.sqp_tol, r.status, 1, max(r.qp_iterations, 0),
+                         norm, r.time_linearisation_s, r.time_qp_s)
 
     @staticmethod
-    def _plausible(w, lbw, ubw, tol: float = 1e-3) -> bool:
+    def _plausible(w, lbw, ubw, tol: float = PLAUSIBLE_TOL) -> bool:
         """A QP that claims success can still return garbage: check it is finite and bounded."""
         return bool(np.isfinite(w).all() and (w >= lbw - tol).all() and (w <= ubw + tol).all())
 
@@ -831,10 +894,9 @@ class NmpcController:
         """The plan's first move as a command: (command, rates, clipped). (Two numbers each:
         in floats, a tenth of the time of numpy's calls.)"""
         dt = self.config.control_period_s
-        planned = plan[self._u0_rates].tolist()
         rates, command, clipped = [], [], False
-        for i, (r, a) in enumerate(zip(planned, act.tolist())):
-            top, bound = self._rate_max_f[i], self._act_hi_f[i]
+        for r, a, top, bound in zip(plan[self._u0_rates].tolist(), act.tolist(),
+                                    self._rate_max_f, self._act_hi_f):
             rate = min(max(r, -top), top)
             wanted = a + rate * dt
             out = min(max(wanted, -bound), bound)

@@ -214,7 +214,7 @@ class HpipmOcpQp:
         self.C, self.lg, self.ug = z((N + 1, ng * nx)), z((N + 1, ng)), z((N + 1, ng))
         self.x, self.u = z((N + 1, nx)), z((N, nu))
         self.info = np.zeros(2, np.intc)
-        self.res = z(4)
+        self.res = z(5)  # HPIPM's largest residuals, then the solution's largest entry
         arrays = (self.A, self.B, self.b, self.q, self.r, self.lbx, self.ubx, self.lbu,
                   self.ubu, self.C, self.lg, self.ug, self.x, self.u)
         self.lib.nmpc_qp_bind(self._handle, *map(_ptr, arrays),
@@ -252,6 +252,11 @@ class HpipmOcpQp:
         """Solve the QP as set: (status, iterations); x and u hold the result."""
         self._solve(self._handle)
         return int(self.info[0]), int(self.info[1])
+
+    def largest_entry(self) -> float:
+        """The last solution's largest |x_i|, |u_i| (NaN when one is NaN): the size of an
+        SQP step, found in C as the solution is copied out."""
+        return float(self.res[4])
 
     def __del__(self):
         handle = getattr(self, "_handle", None)

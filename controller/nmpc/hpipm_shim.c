@@ -25,6 +25,7 @@
  */
 #define _GNU_SOURCE
 #include <dlfcn.h>
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -182,7 +183,8 @@ nmpc_qp *nmpc_qp_create(int N, int nx, int nu, int ng, int nbx, const int *idxbx
  * unused), B: N x nx x nu, b: N x nx, q: (N+1) x nx (stage 0 unused), r: N x nu,
  * lbx/ubx: (N+1) x nbx (stage 0 unused), lbu/ubu: N x nbu, C: (N+1) x ng x nx and
  * lg/ug: (N+1) x ng (stage 0 unused); x: (N+1) x nx (stage 0 left at 0), u: N x nu;
- * info = [status, iterations]; res = max residuals [stat, eq, ineq, comp]. */
+ * info = [status, iterations]; res = max residuals [stat, eq, ineq, comp], then the
+ * largest |x|, |u| of the solution (the step's size; NaN when an entry is NaN). */
 void nmpc_qp_bind(nmpc_qp *h, double *A, double *B, double *b, double *q, double *r,
                   double *lbx, double *ubx, double *lbu, double *ubu, double *C, double *lg,
                   double *ug, double *x, double *u, int *info, double *res)
@@ -245,6 +247,16 @@ int nmpc_qp_solve(nmpc_qp *h)
     for (int k = 0; k < N; k++) F.d_ocp_qp_sol_get_u(k, &h->sol, h->u + k * nu);
     if (h->ns)
         for (int k = 1; k <= N; k++) F.d_ocp_qp_sol_get_sl(k, &h->sol, h->sl + k * h->ng);
+    double largest = 0.0;
+    int nan = 0;
+    for (int i = 0; i < (N + 1) * nx + N * nu; i++) {
+        double a = fabs(i < (N + 1) * nx ? h->x[i] : h->u[i - (N + 1) * nx]);
+        if (a != a)
+            nan = 1;
+        else if (a > largest)
+            largest = a;
+    }
+    h->res[4] = nan ? NAN : largest;
     return h->info[0];
 }
 

@@ -98,6 +98,9 @@ class NmpcConfig:
     obstacle_l2: float = 1e2  # per unit of h squared: keeps the elastic QP well conditioned
     restart_elastic_h: float = 1.0  # a QP whose rows broke by more than this (units of
     # h) is solved again from the reference, the one breaking less kept (0: never)
+    restart_stuck_s: float = 5.0  # a boat held at rest this long by a plan that stays while
+    # the reference goes on, nothing asking it to wait, is planned again from the reference
+    # by SQP to convergence (0: never)
     vessel_l1_share: float = 0.5  # the vessel rows' share of those penalties: where a
     # crowded canal leaves no plan clear of everything, another boat's predicted, inflated
     # hull gives before a wall does (a meeting in a bend steered the boat into the quay)
@@ -187,7 +190,8 @@ class NmpcConfig:
             bad("hull_offsets_m", "needs the two circle centres")
         if self.obstacle_rows not in OBSTACLE_ROWS:
             bad("obstacle_rows", f"choose one of {', '.join(OBSTACLE_ROWS)}")
-        for name in ("obstacle_l1", "obstacle_l2", "vessel_l1_share", "restart_elastic_h"):
+        for name in ("obstacle_l1", "obstacle_l2", "vessel_l1_share", "restart_elastic_h",
+                     "restart_stuck_s"):
             if getattr(self, name) < 0:
                 bad(name, "must not be negative")
         if self.obstacle_rows == "exact-penalty" and not self.obstacle_l1 > 0:

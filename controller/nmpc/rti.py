@@ -71,6 +71,7 @@ class QpStepResult:
     qp_iterations: int
     time_linearisation_s: float
     time_qp_s: float
+    step_norm: float | None = None  # max |dw_i| (NaN: an entry is NaN), when known
 
 
 def _bind(function: ca.Function, inputs: list[np.ndarray]):
@@ -174,6 +175,15 @@ class QpStep:
         self._grad = np.zeros(self.ocp.nw)
         self._lo, self._hi = np.zeros(self.ocp.nw), np.zeros(self.ocp.nw)
         self._dw = np.zeros(self.ocp.nw)
+        # w's stages as rows [x_k, u_k] (x_N alone at the end): the QP's solution is written
+        # into them by slices, in a third of the time of index arrays
+        nz = nx + nu
+        self._dw_x, self._dw_u = self._dw[:N * nz].reshape(N, nz)[:, :nx], \
+            self._dw[:N * nz].reshape(N, nz)[:, nx:]
+        self._dw_last = self._dw[N * nz:]
+        assert (self.states_at[:N] == np.arange(N * nz).reshape(N, nz)[:, :nx]).all() \
+            and (self.inputs_at == np.arange(N * nz).reshape(N, nz)[:, nx:]).all() \
+            and (self.states_at[N] == np.arange(N * nz, N * nz + nx)).all()
         self._bx_at = self.states_at[:, self.bounded_states]
         self._x1_at, self._u0_at = self.states_at[1], self.inputs_at[0]
         self.prepared = False
@@ -229,11 +239,12 @@ class QpStep:
             status, more = self.elastic_qp.solve()
             iterations += more
             self.elastic_used = True
-        dw = self._dw
-        dw[self.states_at[1:]] = qp.x[1:]
-        dw[self.inputs_at] = qp.u
-        dw[self.x0_at] = 0.0
-        return dw.copy(), status == 0, STATUS.get(status, str(status)), iterations
+        x = qp.x  # (its stage 0 is zeros: x_0 is fixed)
+        self._dw_x[:] = x[:-1]
+        self._dw_x[0] = 0.0
+        self._dw_u[:] = qp.u
+        self._dw_last[:] = x[-1]
+        return self._dw.copy(), status == 0, STATUS.get(status, str(status)), iterations
 
     # -- the real-time iteration split: preparation, then feedback ---------------------------
     def prepare(self, w: np.ndarray, p: np.ndarray, lbw: np.ndarray, ubw: np.ndarray,
@@ -272,13 +283,14 @@ class QpStep:
         """The QP prepared at w but for x_0: stage 0 linearised at the new x_0 (as `solve`
         does), the obstacle rows anew if p's segments or vessels changed, the gradient from
         w_ref (None: the one `prepare` set, and p the one it was given), one solve: the QP
-        `solve` would set up. Needs `can_feed_back(w, p)`."""
+        `solve` would set up. Needs `can_feed_back(w, p)`. dw is HPIPM's, unchecked: the
+        caller checks that it is finite (step_norm, its largest entry, is then finite)."""
         t0 = time.perf_counter()
         if w_ref is not None and not (p == self._hl_p).all():
             self._hl_p[:] = p
             self._cl()
             self.qp.set(SET_CONSTRAINTS, 1)
-        self._fs_x0[:] = w[self.x0_at]
+        self._fs_x0[:] = w[:NX]  # (x_0 leads w)
         w.take(self._u0_at, out=self._fs_u0)
         w.take(self._x1_at, out=self._fs_x1)
         self._fs()
@@ -292,8 +304,8 @@ class QpStep:
         self.prepared = False  # stage 0 and the gradient are now this state's
         dw, ok, status, iterations = self._hpipm_result()
         t2 = time.perf_counter()
-        ok = ok and bool(np.isfinite(dw).all())
-        return QpStepResult(dw, ok, status, iterations, t1 - t0, t2 - t1)
+        return QpStepResult(dw, ok, status, iterations, t1 - t0, t2 - t1,
+                            self.qp.largest_entry())
 
     def elastic(self) -> tuple[float, float]:
         """How far the last QP's obstacle rows were violated, in units of h: the largest

@@ -324,6 +324,50 @@ def test_a_failed_warm_start_is_retried_from_the_safe_guess(monkeypatch):
     assert len(calls) == 2 and ctl.consecutive_failures == 0
 
 
+@pytest.mark.parametrize("garbage", ["nan", "past_bounds"])
+def test_a_fed_back_step_that_is_not_finite_or_breaks_bounds_is_not_taken(monkeypatch, garbage):
+    """The feedback checks the step with the OCP's box (x_0's the state's) and the step's
+    size from the HPIPM shim: a QP that claims success with garbage is a failed step."""
+    from controller.nmpc.bench import closed_loop, bend_canal
+
+    canal = bend_canal()
+    ctl = NmpcController(CFG)
+    ubw = ctl._ubw.copy()
+    closed_loop(ctl, canal, X0, ACT0, steps=3, scan_ahead=True)  # a prepared step next
+    original = type(ctl._qp).feedback
+    seen = []
+
+    def spoil(self, *args):
+        r = original(self, *args)
+        dw = r.dw.copy()
+        at = ctl.ocp.states_at[3, 3]  # u at stage 3: bounded
+        dw[at] = np.nan if garbage == "nan" else ubw[at] + 1.0 - args[0][at]
+        seen.append(at)
+        norm = float(np.abs(dw).max())
+        return QpStepResult(dw, True, r.status, r.qp_iterations, 0.0, 0.0, norm)
+
+    monkeypatch.setattr(type(ctl._qp), "feedback", spoil)
+    state, act = X0.copy(), ACT0.copy()
+    step = ctl.feedback(state, act, canal.segments(), canal.waypoints, 2.0)
+    assert seen, "the prepared step was fed back"
+    assert step.stats.fed_back
+    assert step.stats.fallback == "safe_guess"  # the spoiled step was refused, then retried
+    assert np.isfinite(step.command).all()
+
+
+def test_the_shims_largest_entry_is_numpys():
+    """The step's size found in C as HPIPM's solution is copied out equals numpy's
+    max |dw| over the same solution (its twin), NaN passed on."""
+    canal = straight_canal(width_m=20.0)
+    ctl = NmpcController(CFG)
+    for _ in range(3):
+        st = ctl.step(X0, ACT0, canal.segments(), canal.waypoints, 2.0)
+    qp = ctl._qp.qp
+    numpy_twin = max(np.abs(qp.x).max(), np.abs(qp.u).max())
+    assert qp.largest_entry() == numpy_twin > 0.0
+    assert st.stats.ok
+
+
 def test_rti_stays_within_0_2_m_of_converged_sqp_on_the_bend():
     from controller.nmpc.bench import bend_canal
 

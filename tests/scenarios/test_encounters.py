@@ -55,6 +55,22 @@ def test_a_plan_breaking_its_rows_far_is_solved_again_from_the_reference(tmp_pat
     assert check_criteria(off, run_scenario(off, tmp_path / "off", plots=False).summary)
 
 
+def test_a_plan_that_holds_the_boat_at_rest_is_made_again_from_the_reference(tmp_path):
+    """A kayak stopped across half a narrow canal, the boat come up to it behind a barge
+    (fuzz seed 1 case 47, known walls): the real-time iteration's plan held the boat at rest
+    beside the gap for the rest of the run; planned again from the reference once it had
+    for 5 s, the boat goes round and reaches the goal."""
+    scenario = load_scenario(Path(__file__).parent / "regressions"
+                             / "boat_held_at_rest_behind_a_kayak_stopped_across_the_canal.toml")
+    summary = run_scenario(scenario, tmp_path, plots=False).summary
+    assert summary["elastic"]["restarts"] >= 1
+    assert not check_criteria(scenario, summary)
+    off = replace(scenario, controller_options={**scenario.controller_options,
+                                                "restart_stuck_s": 0.0})
+    summary = run_scenario(off, tmp_path / "off", plots=False).summary
+    assert not summary["reached_goal"], summary["status"]
+
+
 @pytest.mark.slow
 def test_vessel_crossing_seed_10_the_soaks_one_failure_reaches_the_goal(tmp_path):
     """The soak's failure at 9bb53ce (`canalnav run scenarios/vessel_crossing.toml --seed
