@@ -477,7 +477,7 @@ class NmpcController:
         restarted = False
         self._elastic = None  # (the QP's own, unless a restart chose between two)
         if result.ok and not from_safe_guess:
-            result, restarted = self._restart_if_elastic(result, x_init, reference, setup,
+            result, restarted = self._restart_from_reference(result, x_init, reference, setup,
                                                          elapsed)
         if not result.ok and not from_safe_guess:
             retry = self._solve(self._safe_guess(x_init, reference, setup.slack_ref), p, w_ref,
@@ -508,7 +508,7 @@ class NmpcController:
                 setup.stop, setup.vessel_sel, setup.rules, fed_back, set_up,
                 prepared is not None, restarted)
 
-    def _restart_if_elastic(self, result: SqpResult, x_init, reference, setup,
+    def _restart_from_reference(self, result: SqpResult, x_init, reference, setup,
                             elapsed_s: float):
         """RTI follows the plan it has: one that passes a vessel on the wrong side of its
         predicted hull (ahead of a kayak crossing, not stopping short as the rules ask) stays

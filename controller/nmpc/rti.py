@@ -178,9 +178,8 @@ class QpStep:
         # w's stages as rows [x_k, u_k] (x_N alone at the end): the QP's solution is written
         # into them by slices, in a third of the time of index arrays
         nz = nx + nu
-        self._dw_x, self._dw_u = self._dw[:N * nz].reshape(N, nz)[:, :nx], \
-            self._dw[:N * nz].reshape(N, nz)[:, nx:]
-        self._dw_last = self._dw[N * nz:]
+        rows = self._dw[:N * nz].reshape(N, nz)
+        self._dw_x, self._dw_u, self._dw_last = rows[:, :nx], rows[:, nx:], self._dw[N * nz:]
         assert (self.states_at[:N] == np.arange(N * nz).reshape(N, nz)[:, :nx]).all() \
             and (self.inputs_at == np.arange(N * nz).reshape(N, nz)[:, nx:]).all() \
             and (self.states_at[N] == np.arange(N * nz, N * nz + nx)).all()
@@ -239,9 +238,8 @@ class QpStep:
             status, more = self.elastic_qp.solve()
             iterations += more
             self.elastic_used = True
-        x = qp.x  # (its stage 0 is zeros: x_0 is fixed)
-        self._dw_x[:] = x[:-1]
-        self._dw_x[0] = 0.0
+        x = qp.x
+        self._dw_x[1:] = x[1:-1]  # (x_0's step stays 0: x_0 is fixed)
         self._dw_u[:] = qp.u
         self._dw_last[:] = x[-1]
         return self._dw.copy(), status == 0, STATUS.get(status, str(status)), iterations

@@ -293,7 +293,7 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
         face_part = (_box_distance(ends_k.mean(axis=1), outlines[parts[1]]).argmin(axis=1)
                      if len(ends_k) else np.zeros(0, int))
         for m, o in enumerate(parts[1]):  # each on its own vessel's axis (body frame)
-            pieces.append((pts[parts[0] == m], _half_turn_angle(outlines[o, 2] - psi),
+            pieces.append((pts[parts[0] == m], half_turn(outlines[o, 2] - psi),
                            ends_k[face_part == m], False))
     for pts, theta, face_k, side in pieces:
         if len(pts) < cfg.min_points:
@@ -390,8 +390,8 @@ def _boxes_apart(a: np.ndarray, b: np.ndarray, shrink_m: float) -> bool:
     return False
 
 
-def _half_turn_angle(theta: float) -> float:
-    """An undirected axis' direction in [-pi/2, pi/2)."""
+def half_turn(theta: float) -> float:
+    """An undirected axis' direction in [-pi/2, pi/2) (the tracker's too)."""
     return (theta + math.pi / 2) % math.pi - math.pi / 2
 
 

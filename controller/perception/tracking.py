@@ -55,7 +55,7 @@ import numpy as np
 from ..errors import InputError
 from ..geometry import wrap_angle
 from . import wall_cells
-from .clusters import Clusters, find_clusters, free_space, remember_walls
+from .clusters import Clusters, find_clusters, free_space, half_turn as _half_turn, remember_walls
 from ..kernels import pointer
 from .cloud_crop import crop_kernel
 from .detection import DEFAULT, DetectionConfig, crop_rows
@@ -843,11 +843,6 @@ def _segments_on(k: _Tracked, segs: np.ndarray, cfg: TrackerConfig) -> np.ndarra
 
 
 # -- run-time input: cleaned, never raised on -------------------------------------------
-def _half_turn(theta):
-    """Direction of an undirected axis in [-pi/2, pi/2)."""
-    return (theta + math.pi / 2) % math.pi - math.pi / 2
-
-
 def _finite_float(v) -> float | None:
     try:
         f = float(v)

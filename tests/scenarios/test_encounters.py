@@ -12,6 +12,12 @@ from scenarios.loop.runner import check_criteria, run_scenario
 from scenarios.scenario_file import load_scenario
 
 FILES = sorted((Path(__file__).parent / "encounters").glob("*.toml"))
+REGRESSIONS = Path(__file__).parent / "regressions"
+
+
+def with_options(scenario, **options):
+    """The scenario with these controller options on top of its own."""
+    return replace(scenario, controller_options={**scenario.controller_options, **options})
 
 
 @pytest.mark.parametrize("perception", [
@@ -34,8 +40,7 @@ def test_meeting_round_a_bend_while_following_fails_the_hard_qp(tmp_path):
     buildings, 59 m off.)"""
     scenario = load_scenario(Path(__file__).parent / "encounters"
                              / "meeting_round_a_bend_while_following.toml")
-    hard = replace(scenario, controller_options={**scenario.controller_options,
-                                                 "obstacle_rows": "hard"})
+    hard = with_options(scenario, obstacle_rows="hard")
     summary = run_scenario(hard, tmp_path, plots=False).summary
     assert summary["status"].startswith("controller failed")
 
@@ -45,13 +50,11 @@ def test_a_plan_breaking_its_rows_far_is_solved_again_from_the_reference(tmp_pat
     known walls): the real-time iteration kept its plan of passing ahead of the kayak,
     breaking the obstacle rows by up to 10 units and coming within 0.27 m of it; solved
     again from the reference, the boat gives way and keeps 2 m."""
-    scenario = load_scenario(Path(__file__).parent / "regressions"
-                             / "kayak_drifting_across_with_the_current_astern.toml")
+    scenario = load_scenario(REGRESSIONS / "kayak_drifting_across_with_the_current_astern.toml")
     summary = run_scenario(scenario, tmp_path, plots=False).summary
     assert summary["elastic"]["restarts"] >= 1
     assert not check_criteria(scenario, summary)
-    off = replace(scenario, controller_options={**scenario.controller_options,
-                                                "restart_elastic_h": 0.0})
+    off = with_options(scenario, restart_elastic_h=0.0)
     assert check_criteria(off, run_scenario(off, tmp_path / "off", plots=False).summary)
 
 
@@ -60,13 +63,12 @@ def test_a_plan_that_holds_the_boat_at_rest_is_made_again_from_the_reference(tmp
     (fuzz seed 1 case 47, known walls): the real-time iteration's plan held the boat at rest
     beside the gap for the rest of the run; planned again from the reference once it had
     for 5 s, the boat goes round and reaches the goal."""
-    scenario = load_scenario(Path(__file__).parent / "regressions"
-                             / "boat_held_at_rest_behind_a_kayak_stopped_across_the_canal.toml")
+    scenario = load_scenario(
+        REGRESSIONS / "boat_held_at_rest_behind_a_kayak_stopped_across_the_canal.toml")
     summary = run_scenario(scenario, tmp_path, plots=False).summary
     assert summary["elastic"]["restarts"] >= 1
     assert not check_criteria(scenario, summary)
-    off = replace(scenario, controller_options={**scenario.controller_options,
-                                                "restart_stuck_s": 0.0})
+    off = with_options(scenario, restart_stuck_s=0.0)
     summary = run_scenario(off, tmp_path / "off", plots=False).summary
     assert not summary["reached_goal"], summary["status"]
 
@@ -80,9 +82,6 @@ def test_vessel_crossing_seed_10_the_soaks_one_failure_reaches_the_goal(tmp_path
     summary = run_scenario(scenario, tmp_path, plots=False).summary
     assert summary["reached_goal"], summary["status"]
     assert not check_criteria(scenario, summary)
-
-
-REGRESSIONS = Path(__file__).parent / "regressions"
 
 
 def test_a_tour_boat_met_beside_a_barge_keeps_its_track(tmp_path):
