@@ -26,8 +26,8 @@ import math
 import numpy as np
 
 from ..geometry import segments_to_endpoints
-
-from .path_geometry import rays_crossing
+from ..kernels import pointer
+from .path_geometry import geometry_kernel, rays_crossing, rays_crossing_numpy
 from .reference import WaypointPath
 
 
@@ -47,25 +47,54 @@ def blind_opening_ahead(path: WaypointPath, progress_m: float, boat_xy, segments
     if not len(s):
         return None
     a, b = segments_to_endpoints(segs)
-    xy, psi = path.at(s)
-    normal = np.column_stack([-np.sin(psi), np.cos(psi)])  # to starboard of the path
     boat = np.asarray(boat_xy, float).reshape(2)
+    far, open_ = side_rays(path, s, boat, a, b, depth_m, lookahead_m)
+    if not open_.any():
+        return None
     found = []
-    for side in (1.0, -1.0):
-        far = xy + side * depth_m * normal  # (n, 2) the far ends of the side rays
-        seen = np.hypot(*(far - boat).T) <= lookahead_m  # beyond, no segment means nothing
-        open_ = ~rays_crossing(xy, far, a, b, closed=True)  # through a
-        # vertex where two walls meet is no way through
-        k = np.flatnonzero(seen & open_)
+    for side in (0, 1):  # starboard, port
+        k = np.flatnonzero(open_[side])
         if not len(k):
             continue
-        k = k[_banked(s[k], side, path, a, b, step_m)]  # a side canal, not a missed wall
+        k = k[_banked(s[k], 1.0 - 2.0 * side, path, a, b, step_m)]  # a side canal, not a
+        # missed wall
         if not len(k):
             continue
-        blind = rays_crossing(boat, far[k], a, b)
+        blind = rays_crossing(boat, far[side, k], a, b)
         if blind.any():
             found.append(float(s[k[np.argmax(blind)]]))
     return min(found) if found else None
+
+
+def side_rays(path: WaypointPath, s: np.ndarray, boat: np.ndarray, a: np.ndarray,
+              b: np.ndarray, depth_m: float, reach_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """The rays `depth_m` across the path at arc lengths `s` (n,), to starboard then to port:
+    their far ends (2, n, 2), and (2, n) which lie within `reach_m` of the `boat` and meet no
+    wall a -> b (through a vertex where two walls meet is no way through). By the compiled
+    kernel (`path_geometry.c`), or `side_rays_numpy` where there is none."""
+    lib = geometry_kernel()
+    if lib is None:
+        return side_rays_numpy(path, s, boat, a, b, depth_m, reach_m)
+    n = len(s)
+    far, open_ = np.empty((2, n, 2)), np.empty((2, n), np.uint8)
+    a, b = np.ascontiguousarray(a, float), np.ascontiguousarray(b, float)
+    lib.side_rays(n, pointer(np.ascontiguousarray(s, float)), len(path.leg_length),
+                  pointer(path.start), pointer(path.delta), pointer(path.leg_length),
+                  pointer(path.cumulative), pointer(path.heading), float(depth_m),
+                  float(reach_m), float(boat[0]), float(boat[1]), len(a), pointer(a),
+                  pointer(b), pointer(far), pointer(open_))
+    return far, open_.view(bool)
+
+
+def side_rays_numpy(path: WaypointPath, s: np.ndarray, boat: np.ndarray, a: np.ndarray,
+                    b: np.ndarray, depth_m: float, reach_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """`side_rays`' numpy twin."""
+    xy, psi = path.at(s)
+    normal = np.column_stack([-np.sin(psi), np.cos(psi)])  # to starboard of the path
+    far = np.stack([xy + side * depth_m * normal for side in (1.0, -1.0)])
+    seen = np.hypot(far[..., 0] - boat[0], far[..., 1] - boat[1]) <= reach_m
+    open_ = ~np.stack([rays_crossing_numpy(xy, f, a, b, closed=True) for f in far])
+    return far, seen & open_
 
 
 def _banked(s_open: np.ndarray, side: float, path: WaypointPath, a, b, step_m: float,

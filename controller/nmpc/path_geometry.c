@@ -2,6 +2,7 @@
  * `slack_reference.py`), in the same operations and order; only the sines and cosines may
  * round differently from numpy's (its vectorised ones), by an ulp.
  *
+ * path_points, path_project: WaypointPath.at and .project.
  * path_frame: arc length s and signed offset d (> 0 to starboard) of n points against the
  *   legs of a waypoint path whose extent overlaps [s_min, s_max] (WaypointPath.frame).
  * forced_slack_at: the slack each point's hull circle needs midway between the walls abeam
@@ -14,7 +15,12 @@
  *   no free interval reached from the slab before, and where the path's line must shift.
  * rays_crossing: which of n sight lines p -> q cross any of m walls a -> b
  *   (geometry.segments_cross(...).any(axis=1)), `closed` counting touches too; a p stride
- *   of 0 casts every line from the one point p. */
+ *   of 0 casts every line from the one point p.
+ * forced_slack_stages: per stage, the least forced slack over its stretch of the path
+ *   (slack_reference.forced_slack), the samples taken and moved across the path here.
+ * side_rays: the blind-opening rule's rays across the path (blind_openings.side_rays): at n
+ *   arc lengths, the far ends of rays `depth` to starboard and to port, and which of them
+ *   lie within `reach` of the boat and meet no wall (touching counts). */
 #include <math.h>
 #include <stdint.h>
 
@@ -52,6 +58,25 @@ void path_frame(int64_t n, const double *px, const double *py, int64_t legs,
         s_out[i] = best_s;
         d_out[i] = best_d;
     }
+}
+
+/* WaypointPath.at for one arc length: the point and the leg's index (searchsorted right, less
+ * one, on s clamped to the path). */
+static int64_t path_at(double s, int64_t legs, const double *start, const double *delta,
+                       const double *length, const double *cum, double *x, double *y)
+{
+    s = s < 0.0 ? 0.0 : s;  /* (a NaN stays NaN, and on the last leg, as in numpy) */
+    s = s > cum[legs] ? cum[legs] : s;
+    int64_t lo = 0, hi = legs + 1;  /* the first index with cum > s */
+    while (lo < hi) {
+        int64_t mid = (lo + hi) / 2;
+        if (cum[mid] > s) hi = mid; else lo = mid + 1;
+    }
+    int64_t k = lo - 1 < legs - 1 ? lo - 1 : legs - 1;
+    double t = (s - cum[k]) / length[k];
+    *x = start[2 * k] + t * delta[2 * k];
+    *y = start[2 * k + 1] + t * delta[2 * k + 1];
+    return k;
 }
 
 static double pow4(double x)
@@ -295,4 +320,109 @@ int64_t walk_slabs(int64_t n, const int64_t *slab, const double *d, int64_t n_sl
     }
     *n_shifts = ns;
     return -1;
+}
+
+void side_rays(int64_t n, const double *s, int64_t legs, const double *start,
+               const double *delta, const double *length, const double *cum,
+               const double *heading, double depth, double reach, double bx, double by,
+               int64_t m, const double *a, const double *b, double *far, uint8_t *open)
+{
+    for (int64_t i = 0; i < n; i++) {
+        double x, y;
+        int64_t k = path_at(s[i], legs, start, delta, length, cum, &x, &y);
+        double nx = -sin(heading[k]), ny = cos(heading[k]);  /* to starboard */
+        for (int side = 0; side < 2; side++) {
+            double w = (side == 0 ? 1.0 : -1.0) * depth;
+            double fx = x + w * nx, fy = y + w * ny;
+            double *f = far + 2 * (side * n + i);
+            f[0] = fx;
+            f[1] = fy;
+            uint8_t ok = hypot(fx - bx, fy - by) <= reach;
+            if (ok) {
+                double p[2] = {x, y};
+                rays_crossing(1, p, 0, f, m, a, b, 1, &ok);
+                ok = !ok;
+            }
+            open[side * n + i] = ok;
+        }
+    }
+}
+
+/* forced_slack's stages: the path sampled every `spacing` from `start` (count samples), moved
+ * across it by d (NULL: on the path), each sample's forced slack (forced_slack_at), and per
+ * stage the least over its samples [lo, hi]. scratch: 4 count + 6 M doubles. */
+void forced_slack_stages(int64_t n, const double *lo, const double *hi, double start,
+                         double spacing, int64_t count, const double *d, int64_t legs,
+                         const double *path_start, const double *delta, const double *length,
+                         const double *cum, const double *heading, int64_t M,
+                         const double *seg, double margin, double slack_min, double *out,
+                         double *scratch)
+{
+    double *px = scratch, *py = scratch + count, *h = scratch + 2 * count;
+    double *forced = scratch + 3 * count;
+    for (int64_t i = 0; i < n; i++) out[i] = 0.0;
+    for (int64_t i = 0; i < count; i++) {
+        int64_t k = path_at(start + spacing * (double)i, legs, path_start, delta, length, cum,
+                            px + i, py + i);
+        h[i] = heading[k];
+        if (d && d[i] != 0.0) {
+            px[i] = px[i] + d[i] * -sin(h[i]);
+            py[i] = py[i] + d[i] * cos(h[i]);
+        }
+    }
+    if (!forced_slack_at(count, px, py, h, M, seg, margin, slack_min, forced,
+                         scratch + 4 * count))
+        return;
+    for (int64_t i = 0; i < n; i++) {
+        int64_t first = (int64_t)ceil((lo[i] - start) / spacing - 1e-9);
+        first = first < count - 1 ? first : count - 1;
+        int64_t last = (int64_t)floor((hi[i] - start) / spacing + 1e-9);
+        last = last < count - 1 ? last : count - 1;
+        last = last > first ? last : first;
+        double v = forced[first];
+        for (int64_t j = first + 1; j <= last; j++) v = forced[j] < v ? forced[j] : v;
+        out[i] = v;
+    }
+}
+
+/* WaypointPath.at for n arc lengths: points (n, 2) and leg headings. */
+void path_points(int64_t n, const double *s, int64_t legs, const double *start,
+                 const double *delta, const double *length, const double *cum,
+                 const double *heading, double *xy, double *psi)
+{
+    for (int64_t i = 0; i < n; i++)
+        psi[i] = heading[path_at(s[i], legs, start, delta, length, cum, xy + 2 * i,
+                                 xy + 2 * i + 1)];
+}
+
+/* WaypointPath.project: the arc length in [s_min, s_max] of the path's point closest to
+ * (px, py), and the distance to it, in project's operations (the first of equal ones). */
+double path_project(double px, double py, int64_t legs, const double *start,
+                    const double *delta, const double *length, const double *cum,
+                    double s_min, double s_max, double *s_out)
+{
+    s_max = s_max < cum[legs] ? s_max : cum[legs];
+    s_min = s_min < s_max ? s_min : s_max;
+    double best = INFINITY, best_s = 0.0;
+    int found = 0;
+    for (int64_t k = 0; k < legs; k++) {
+        double lo = cum[k] > s_min ? cum[k] : s_min;
+        double hi = cum[k + 1] < s_max ? cum[k + 1] : s_max;
+        if (!(lo <= hi)) continue;
+        double dx = px - start[2 * k], dy = py - start[2 * k + 1];
+        double along = (dx * delta[2 * k] + dy * delta[2 * k + 1]) / length[k];
+        double s = cum[k] + along;
+        s = s > lo ? s : lo;
+        s = s < hi ? s : hi;
+        double t = (s - cum[k]) / length[k];
+        double x = start[2 * k] + t * delta[2 * k], y = start[2 * k + 1] + t * delta[2 * k + 1];
+        double dist = hypot(x - px, y - py);
+        if (!found || dist < best) {
+            found = 1;
+            best = dist;
+            best_s = s;
+        }
+    }
+    *s_out = best_s;
+    return best;
 }

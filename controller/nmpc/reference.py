@@ -9,8 +9,10 @@ runs into the outer wall within the 50 m horizon.
 
 from __future__ import annotations
 
+import ctypes
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -56,7 +58,21 @@ class WaypointPath:
         return float(self.cumulative[-1])
 
     def project(self, point, s_min: float = 0.0, s_max: float | None = None) -> tuple[float, float]:
-        """(s, distance) of the closest point with arc length in [s_min, s_max]."""
+        """(s, distance) of the closest point with arc length in [s_min, s_max]. By the
+        compiled kernel (`path_geometry.c`), or `project_numpy` where there is none."""
+        lib = geometry_kernel()
+        if lib is None:
+            return self.project_numpy(point, s_min, s_max)
+        p = np.asarray(point, float)
+        s = ctypes.c_double()
+        legs, start, delta, length, cum, _ = self._kernel_arrays
+        dist = lib.path_project(float(p[0]), float(p[1]), legs, start, delta, length, cum,
+                                float(s_min), float(self.cumulative[-1] if s_max is None
+                                                    else s_max), ctypes.byref(s))
+        return s.value, dist
+
+    def project_numpy(self, point, s_min: float = 0.0, s_max: float | None = None) -> tuple[float, float]:
+        """`project`'s numpy twin."""
         cum, L = self.cumulative, self.leg_length
         s_max = cum[-1] if s_max is None else min(s_max, cum[-1])
         s_min = min(s_min, s_max)
@@ -114,7 +130,19 @@ class WaypointPath:
         return s[rows, best], np.where(side >= 0.0, offset, -offset)
 
     def at(self, s) -> tuple[np.ndarray, np.ndarray]:
-        """Points (n, 2) and leg headings (n,) at arc lengths s, clamped to the ends."""
+        """Points (n, 2) and leg headings (n,) at arc lengths s, clamped to the ends. By the
+        compiled kernel (`path_geometry.c`), or `at_numpy` where there is none."""
+        lib = geometry_kernel()
+        s = np.atleast_1d(np.asarray(s, float))
+        if lib is None or s.ndim != 1:
+            return self.at_numpy(s)
+        s = np.ascontiguousarray(s)
+        xy, psi = np.empty((len(s), 2)), np.empty(len(s))
+        lib.path_points(len(s), pointer(s), *self._kernel_arrays, pointer(xy), pointer(psi))
+        return xy, psi
+
+    def at_numpy(self, s) -> tuple[np.ndarray, np.ndarray]:
+        """`at`'s numpy twin."""
         cum = self.cumulative
         s = np.minimum(np.maximum(np.atleast_1d(np.asarray(s, float)), 0.0), cum[-1])
         i = np.minimum(np.searchsorted(cum, s, side="right") - 1, len(self.leg_length) - 1)
@@ -123,6 +151,13 @@ class WaypointPath:
         xy = self.start.take(i, axis=0)
         xy += t[:, None] * self.delta.take(i, axis=0)
         return xy, self.heading[i]
+
+    @cached_property
+    def _kernel_arrays(self) -> tuple:
+        """The leg count and the arrays' addresses the kernels take (start, delta, leg
+        lengths, cumulative lengths, headings): the arrays are fixed, so taken once."""
+        return (len(self.leg_length), pointer(self.start), pointer(self.delta),
+                pointer(self.leg_length), pointer(self.cumulative), pointer(self.heading))
 
 
 def waypoint_path(waypoints) -> WaypointPath:

@@ -217,21 +217,46 @@ def forced_slack(path: WaypointPath, lo_m: np.ndarray, hi_m: np.ndarray, segment
                  offset=None) -> np.ndarray:
     """Per stage, the most negative forced slack (`forced_slack_at`) over the path's arc
     lengths [lo_m, hi_m] (one interval a stage), sampled every `spacing_m`; `offset(s)`: the
-    line the boat follows across the path there (+ to starboard), as the reference's."""
-    lo = np.minimum(np.maximum(np.asarray(lo_m, float), 0.0), path.length)
-    hi = np.minimum(np.maximum(np.asarray(hi_m, float), lo), path.length)
-    out = np.zeros(len(lo))
+    line the boat follows across the path there (+ to starboard), as the reference's. By the
+    compiled kernel (`path_geometry.c`), or `forced_slack_numpy` where there is none."""
+    lib = geometry_kernel()
+    if lib is None:
+        return forced_slack_numpy(path, lo_m, hi_m, segments, margin_m, slack_min_m, spacing_m,
+                                  offset)
+    lo, hi, out = _stretches(path, lo_m, hi_m)
     if len(segments) == 0 or len(lo) == 0:
         return out
-    start = float(lo.min())
-    count = int((float(hi.max()) - start) / spacing_m + 1.999999)
+    start, count = _samples(lo, hi, spacing_m)
+    d = None
+    if offset is not None:
+        d = np.ascontiguousarray(offset(start + spacing_m * np.arange(count)), float)
+        d = d if d.any() else None
+    seg = np.ascontiguousarray(segments, float).reshape(-1, 4)
+    scratch = np.empty(4 * count + 6 * len(seg))
+    lib.forced_slack_stages(len(lo), pointer(lo), pointer(hi), start, float(spacing_m), count,
+                            None if d is None else pointer(d), len(path.leg_length),
+                            pointer(path.start), pointer(path.delta), pointer(path.leg_length),
+                            pointer(path.cumulative), pointer(path.heading), len(seg),
+                            pointer(seg), float(margin_m), float(slack_min_m), pointer(out),
+                            pointer(scratch))
+    return out
+
+
+def forced_slack_numpy(path: WaypointPath, lo_m: np.ndarray, hi_m: np.ndarray,
+                       segments: np.ndarray, margin_m: float, slack_min_m: float,
+                       spacing_m: float = 1.0, offset=None) -> np.ndarray:
+    """`forced_slack`'s numpy twin."""
+    lo, hi, out = _stretches(path, lo_m, hi_m)
+    if len(segments) == 0 or len(lo) == 0:
+        return out
+    start, count = _samples(lo, hi, spacing_m)
     s = start + spacing_m * np.arange(count)
     points, headings = path.at(s)
     if offset is not None:
         d = np.asarray(offset(s), float)
         if d.any():
             points = points + d[:, None] * np.column_stack([-np.sin(headings), np.cos(headings)])
-    forced = forced_slack_at(points, headings, segments, margin_m, slack_min_m)
+    forced = forced_slack_at_numpy(points, headings, segments, margin_m, slack_min_m)
     if not forced.any():
         return out
     # each stage's samples: indices first..last (at least one), all inside the sampled range
@@ -240,3 +265,16 @@ def forced_slack(path: WaypointPath, lo_m: np.ndarray, hi_m: np.ndarray, segment
                       .astype(int), first)
     idx = np.minimum(first[:, None] + np.arange(int((last - first).max()) + 1), last[:, None])
     return forced[idx].min(axis=1)
+
+
+def _stretches(path: WaypointPath, lo_m, hi_m):
+    """The stages' stretches [lo, hi] clipped to the path, and a zero slack per stage."""
+    lo = np.minimum(np.maximum(np.asarray(lo_m, float), 0.0), path.length)
+    hi = np.minimum(np.maximum(np.asarray(hi_m, float), lo), path.length)
+    return lo, hi, np.zeros(len(lo))
+
+
+def _samples(lo: np.ndarray, hi: np.ndarray, spacing_m: float) -> tuple[float, int]:
+    """The first sample and how many, `spacing_m` apart, cover every stretch."""
+    start = float(lo.min())
+    return start, int((float(hi.max()) - start) / spacing_m + 1.999999)

@@ -107,3 +107,62 @@ def test_walk_slabs_is_its_numpy_twin(seed):
     got, want = walk_slabs(slab, d, *args), walk_slabs_numpy(slab, d, *args)
     assert got[0] == want[0]
     assert got[1] == want[1]
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_side_rays_are_their_numpy_twin(seed):
+    from controller.nmpc.blind_openings import side_rays, side_rays_numpy
+    from controller.nmpc.reference import waypoint_path
+
+    rng = np.random.default_rng(700 + seed)
+    path = waypoint_path(np.cumsum(rng.uniform(-30, 60, (int(rng.integers(2, 8)), 2)), axis=0))
+    s = np.arange(-5.0, path.length + 5.0, 2.0)  # past both ends too: clamped
+    m = int(rng.integers(0, 40))
+    a = rng.uniform(-60, 250, (m, 2))
+    b = a + rng.uniform(-40, 40, (m, 2))
+    boat = path.at(rng.uniform(0, path.length))[0][0]
+    far, open_ = side_rays(path, s, boat, a, b, 25.0, 60.0)
+    want_far, want_open = side_rays_numpy(path, s, boat, a, b, 25.0, 60.0)
+    np.testing.assert_allclose(far, want_far, rtol=0, atol=1e-12)  # sines: an ulp apart
+    np.testing.assert_array_equal(open_, want_open)
+    assert far.shape == (2, len(s), 2) and open_.dtype == bool
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_forced_slack_stages_are_their_numpy_twin(seed):
+    from controller.nmpc.reference import waypoint_path
+    from controller.nmpc.slack_reference import forced_slack, forced_slack_numpy
+
+    rng = np.random.default_rng(800 + seed)
+    path = waypoint_path(np.cumsum(rng.uniform(5, 40, (int(rng.integers(2, 6)), 2)), axis=0))
+    walls = []  # quays 3-6 m either side of the path's legs, with gaps
+    for a, b in zip(path.polyline.points[:-1], path.polyline.points[1:]):
+        u = (b - a) / np.hypot(*(b - a))
+        for side in (1.0, -1.0):
+            c = 0.5 * (a + b) + side * rng.uniform(3.0, 6.0) * np.array([-u[1], u[0]])
+            walls.append([*c, np.arctan2(u[1], u[0]) + rng.normal(0, 0.2),
+                          rng.uniform(5, np.hypot(*(b - a)))])
+    segments = np.array(walls)
+    lo = np.sort(rng.uniform(-5, path.length, 20))
+    hi = lo + rng.uniform(0, 8, 20)
+    sway = rng.uniform(-2, 2)
+    for offset in (None, lambda s: np.zeros_like(s), lambda s: sway * np.sin(s / 7.0)):
+        got = forced_slack(path, lo, hi, segments, 5.0, -4.9, offset=offset)
+        want = forced_slack_numpy(path, lo, hi, segments, 5.0, -4.9, offset=offset)
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)  # sines: an ulp apart
+    assert (want < 0).any()  # walls close enough to force a slack
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_path_points_and_projection_are_their_numpy_twins(seed):
+    from controller.nmpc.reference import waypoint_path
+
+    rng = np.random.default_rng(900 + seed)
+    path = waypoint_path(np.cumsum(rng.uniform(-20, 40, (int(rng.integers(2, 9)), 2)), axis=0))
+    s = np.concatenate([rng.uniform(-10, path.length + 10, 40), path.cumulative, [np.nan]])
+    for got, want in zip(path.at(s), path.at_numpy(s)):
+        np.testing.assert_array_equal(got, want)
+    for point in rng.uniform(-40, 120, (30, 2)):
+        lo = rng.uniform(1, path.length)  # (a window wholly before the path has no point)
+        for window in ((0.0, None), (lo, lo + rng.uniform(0, 50)), (lo, lo - 1.0), (-3, 0)):
+            assert path.project(point, *window) == path.project_numpy(point, *window)
