@@ -27,7 +27,7 @@ from .rti import QpOptions, QpStep, SqpResult, sqp
 from .blind_openings import ask_below_cap, blind_opening_ahead, blind_speed_cap
 from .passage import WayAhead
 from .seamanship import Shaping, assess
-from .segment_slots import SLOT_FIELDS, check_segments, select_checked
+from .segment_slots import SLOT_FIELDS, check_segments, kept_in_place, select_checked
 from .slack_reference import forced_slack
 from .vessel_slots import predict_vessels
 
@@ -319,7 +319,6 @@ class NmpcController:
         self._steady = False  # the last step's inputs were the ones before it
         self._last_p: np.ndarray | None = None  # the last step's parameters
         self._slots_prev: np.ndarray | None = None
-        self._slot_at: dict[tuple, int] = {}  # a segment (x_c, y_c, theta, length) -> its slot
         self._preparation_s = 0.0
 
     # -- the step ---------------------------------------------------------------------------
@@ -622,10 +621,10 @@ class NmpcController:
     def _memory(self) -> tuple:
         """What `_setup` moves on, to be put back when a prepared setup goes unused."""
         return (self._way.memory(), self._rules_stop, self._rules_clear_s, self._slots_prev,
-                self._slot_at, self._giving_way)
+                self._giving_way)
 
     def _restore(self, memory: tuple) -> None:
-        (way, self._rules_stop, self._rules_clear_s, self._slots_prev, self._slot_at,
+        (way, self._rules_stop, self._rules_clear_s, self._slots_prev,
          self._giving_way) = memory
         self._way.restore(way)
 
@@ -710,42 +709,13 @@ class NmpcController:
         return result
 
     def _keep_slots(self, slots: np.ndarray) -> np.ndarray:
-        """The selected segments with each one still selected in the slot it had last step:
-        the order of the slots does not change the OCP, and a set of slots unchanged from
-        the prepared step lets the feedback keep the prepared constraints. (Rows matched
-        through a dict of last step's: 16 lookups cost less than the 16 x 16 comparison.)"""
+        """The selected segments with each one still selected in the slot it had last step
+        (`segment_slots.kept_in_place`)."""
         prev = self._slots_prev
         if prev is not None and (slots == prev).all():
             return prev  # the same segments in the same slots (a static map, a still scene)
-        out = slots
-        if prev is not None:
-            out = self._matched_slots(slots)
+        out = slots if prev is None else kept_in_place(slots, prev)
         self._slots_prev = out
-        self._slot_at = {}
-        for j, row in enumerate(out.tolist()):  # where each active segment sits now
-            if row[4] > 0:
-                self._slot_at.setdefault(tuple(row[:4]), j)
-        return out
-
-    def _matched_slots(self, slots: np.ndarray) -> np.ndarray:
-        """`slots` reordered so that each segment of last step's slots keeps its slot, the
-        new ones in the free slots in order; unchanged when none is kept or two match one."""
-        old_at, matched, rest = [], [], []
-        for i, row in enumerate(slots.tolist()):
-            if row[4] > 0:
-                j = self._slot_at.get(tuple(row[:4]))
-                if j is None:
-                    rest.append(i)
-                else:
-                    old_at.append(j)
-                    matched.append(i)
-        if not old_at or len(set(old_at)) < len(old_at):  # none kept, or a duplicate
-            return slots
-        out = np.zeros_like(slots)
-        out[old_at] = slots[matched]
-        taken = set(old_at)
-        free = [j for j in range(len(slots)) if j not in taken]
-        out[free[: len(rest)]] = slots[rest]
         return out
 
     def _feed_back(self, w, p, w_ref) -> SqpResult:

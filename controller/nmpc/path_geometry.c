@@ -18,6 +18,8 @@
  *   of 0 casts every line from the one point p.
  * forced_slack_stages: per stage, the least forced slack over its stretch of the path
  *   (slack_reference.forced_slack), the samples taken and moved across the path here.
+ * keep_slots: the segment slots rearranged so that a segment kept from the last step keeps
+ *   its slot (segment_slots.kept_in_place).
  * side_rays: the blind-opening rule's rays across the path (blind_openings.side_rays): at n
  *   arc lengths, the far ends of rays `depth` to starboard and to port, and which of them
  *   lie within `reach` of the boat and meet no wall (touching counts). */
@@ -425,4 +427,44 @@ double path_project(double px, double py, int64_t legs, const double *start,
     }
     *s_out = best_s;
     return best;
+}
+
+/* segment_slots.kept_in_place: `slots` (n rows x_c, y_c, theta, length, active) rearranged
+ * into `out` so that each active row also active in `prev` (the first such there, compared
+ * exactly) keeps prev's slot and the other active rows fill the free slots in order. Returns
+ * 0, `out` not written, when no row is kept or two would take one slot. scratch: 2 n. */
+int64_t keep_slots(int64_t n, const double *slots, const double *prev, int64_t *scratch,
+                   double *out)
+{
+    int64_t *slot_of = scratch, *owner = scratch + n, kept = 0;
+    for (int64_t j = 0; j < n; j++) owner[j] = -1;
+    for (int64_t i = 0; i < n; i++) {
+        const double *r = slots + 5 * i;
+        slot_of[i] = -2;  /* inactive: dropped */
+        if (!(r[4] > 0)) continue;
+        slot_of[i] = -1;  /* active, new */
+        for (int64_t j = 0; j < n; j++) {
+            const double *q = prev + 5 * j;
+            if (q[4] > 0 && q[0] == r[0] && q[1] == r[1] && q[2] == r[2] && q[3] == r[3]) {
+                if (owner[j] >= 0) return 0;  /* two rows for one slot */
+                owner[j] = i;
+                slot_of[i] = j;
+                kept++;
+                break;
+            }
+        }
+    }
+    if (!kept) return 0;
+    for (int64_t k = 0; k < 5 * n; k++) out[k] = 0.0;
+    int64_t free_slot = 0;
+    for (int64_t i = 0; i < n; i++) {
+        int64_t j = slot_of[i];
+        if (j == -1) {  /* the next slot nobody keeps */
+            while (owner[free_slot] >= 0) free_slot++;
+            j = free_slot++;
+        }
+        if (j >= 0)
+            for (int k = 0; k < 5; k++) out[5 * j + k] = slots[5 * i + k];
+    }
+    return 1;
 }

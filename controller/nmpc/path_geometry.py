@@ -1,7 +1,8 @@
 """The compiled geometry of the NMPC's step (`path_geometry.c`): points at arc lengths, the
 closest point and the path frame of points (`WaypointPath.at`, `.project`, `.frame`), the
 forced slack (`slack_reference.forced_slack_at`, and per stage `forced_slack`), the walls
-abeam (`slack_reference.walls_abeam`), the segment slots' ranking (`slot_distances`), the
+abeam (`slack_reference.walls_abeam`), the segment slots' ranking and
+keeping (`slot_distances`, `segment_slots.kept_in_place`), the
 passage sweep's walk (`passage.walk_slabs`) and the rays and sight lines of the
 blind-opening rule (`blind_openings.side_rays`, `rays_crossing`): the largest numpy costs of
 a step's set-up after the QP. Loaded once per process; None where nothing can be compiled,
@@ -31,6 +32,7 @@ geometry_kernel = Kernel(Path(__file__).with_name("path_geometry.c"), {
                             + [_i64, _ptr, _f64, _f64, _ptr, _ptr]),
     "path_points": (None, [_i64, _ptr, _i64] + [_ptr] * 7),
     "path_project": (_f64, [_f64, _f64, _i64] + [_ptr] * 4 + [_f64, _f64, _ptr]),
+    "keep_slots": (_i64, [_i64] + [_ptr] * 4),
     "side_rays": (None, [_i64, _ptr, _i64] + [_ptr] * 5 + [_f64] * 4 + [_i64] + [_ptr] * 4)})
 """The compiled path geometry (call it: the library, or None for the numpy versions)."""
 

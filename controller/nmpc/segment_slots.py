@@ -26,7 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from .path_geometry import slot_distances
+from ..kernels import pointer
+from .path_geometry import geometry_kernel, slot_distances
 
 SLOT_FIELDS = ("x_c", "y_c", "theta", "length", "active")
 
@@ -97,6 +98,50 @@ def select_checked(arr: np.ndarray, position, n_slots: int = 16, range_m: float 
     left_out = order[n_slots:]
     nearest = float(to_plan[left_out].min()) if len(left_out) else np.inf
     return SegmentSelection(slots, len(left_out), nearest)
+
+
+def kept_in_place(slots: np.ndarray, prev: np.ndarray) -> np.ndarray:
+    """`slots` (n, 5) rearranged so that each segment also in last step's `prev` keeps the
+    slot it had there, the new ones in the free slots in order: the order of the slots does
+    not change the OCP, and unchanged slots let the feedback keep the prepared constraints.
+    `slots` itself when none is kept or two rows match one. By the compiled kernel
+    (`path_geometry.c`), or `kept_in_place_numpy` where there is none."""
+    lib = geometry_kernel()
+    if lib is None:
+        return kept_in_place_numpy(slots, prev)
+    slots = np.ascontiguousarray(slots, float)
+    prev = np.ascontiguousarray(prev, float)
+    out = np.empty_like(slots)
+    scratch = np.empty(2 * len(slots), np.int64)
+    if len(prev) != len(slots) or not lib.keep_slots(len(slots), pointer(slots), pointer(prev),
+                                                     pointer(scratch), pointer(out)):
+        return slots
+    return out
+
+
+def kept_in_place_numpy(slots: np.ndarray, prev: np.ndarray) -> np.ndarray:
+    """`kept_in_place`'s numpy twin: last step's rows looked up in a dict."""
+    slot_at: dict = {}
+    for j, row in enumerate(prev.tolist()):
+        if row[4] > 0:
+            slot_at.setdefault(tuple(row[:4]), j)
+    old_at, matched, rest = [], [], []
+    for i, row in enumerate(slots.tolist()):
+        if row[4] > 0:
+            j = slot_at.get(tuple(row[:4]))
+            if j is None:
+                rest.append(i)
+            else:
+                old_at.append(j)
+                matched.append(i)
+    if not old_at or len(set(old_at)) < len(old_at):  # none kept, or a duplicate
+        return slots
+    out = np.zeros_like(slots)
+    out[old_at] = slots[matched]
+    taken = set(old_at)
+    free = [j for j in range(len(slots)) if j not in taken]
+    out[free[: len(rest)]] = slots[rest]
+    return out
 
 
 def fill_segment_slots(segments, position, n_slots: int = 16, range_m: float = np.inf,

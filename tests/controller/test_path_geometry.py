@@ -166,3 +166,19 @@ def test_path_points_and_projection_are_their_numpy_twins(seed):
         lo = rng.uniform(1, path.length)  # (a window wholly before the path has no point)
         for window in ((0.0, None), (lo, lo + rng.uniform(0, 50)), (lo, lo - 1.0), (-3, 0)):
             assert path.project(point, *window) == path.project_numpy(point, *window)
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_slots_kept_in_place_are_their_numpy_twin(seed):
+    from controller.nmpc.segment_slots import kept_in_place, kept_in_place_numpy
+
+    rng = np.random.default_rng(1000 + seed)
+    n = 16
+    pool = np.column_stack([rng.integers(-3, 3, (24, 4)).astype(float), np.ones(24)])
+    pool[:, :4] *= 1.0 - 2.0 * (rng.random((24, 4)) < 0.1)  # some -0.0 beside 0.0
+    prev = pool[rng.choice(24, n)]  # repeats too: two rows for one slot
+    slots = pool[rng.choice(24, n)]
+    for rows in (prev, slots):
+        rows[rng.random(n) < 0.3, 4] = 0.0  # inactive rows
+    got, want = kept_in_place(slots, prev), kept_in_place_numpy(slots, prev)
+    np.testing.assert_array_equal(got, want)  # (seeds 1000-1029: 13 rearranged, 17 kept)
