@@ -29,7 +29,7 @@ from .passage import WayAhead
 from .seamanship import Shaping, assess
 from .segment_slots import SLOT_FIELDS, check_segments, kept_in_place, select_checked
 from .slack_reference import forced_slack
-from .vessel_slots import predict_vessels
+from .vessel_slots import at_rest, predict_vessels, rest_outlines
 
 METHODS = ("rti", "sqp", "ipopt")
 STUCK_SQP_ITERATIONS = 10
@@ -103,8 +103,11 @@ class NmpcStep:
 
 
 def _moving(vessels) -> tuple:
-    """The tracks that take a vessel slot: a track not moving is an obstacle like a wall."""
-    return tuple(v for v in vessels if getattr(v, "moving", True))
+    """The tracks the controller keeps: moving ones (a vessel slot, the rules of the road)
+    and vessels at rest (`vessel_slots.at_rest`: walls grown by `rest_keep_m`); any other
+    track not moving is an obstacle like a wall, its sides among the segments."""
+    return tuple(v for v in vessels if getattr(v, "moving", True)
+                 or getattr(v, "vessel", False))
 
 
 class _Inputs(NamedTuple):
@@ -397,7 +400,8 @@ class NmpcController:
         tracks of other vessels (`perception.tracking.Track`), each moving one avoided at every
         stage as predicted from its track (`vessel_slots`) and met by the rules of the road; a
         track that is not moving (`moving` False) is an obstacle like a wall, its sides among
-        the segments, and takes neither a slot nor a rule.
+        the segments, and takes neither a slot nor a rule; one known for a vessel (`vessel`:
+        under way once) is a wall grown by `rest_keep_m`, passed 2 m off hull to hull.
         Where the segments leave no passage along the route, or when blind, the reference
         slows the boat to a stop short of it and holds (`passage`); `stats.waiting` says why.
         """
@@ -583,6 +587,13 @@ class NmpcController:
             self._progress_m = self._path.project(x[:2])[0]
         s, d = self._path.frame(x[None, :2], self._progress_m,
                                 self._progress_m + self.search_ahead_m)  # the boat on the path
+        resting = at_rest(vessels)
+        if resting:  # vessels at rest: walls grown by rest_keep_m, not slots or rules
+            vessels = tuple(v for v in vessels if v not in resting)
+            if c.rest_keep_m > 0:  # (0: their sides are walls as they are)
+                circles = x[:2] + np.outer(c.hull_offsets_m, (np.cos(x[2]), np.sin(x[2])))
+                segs = np.vstack([segs, rest_outlines(resting, c.rest_keep_m, circles,
+                                                      c.hull_radius_m)])
         stop = self._stop(float(s[0]), float(d[0]), x, segs, elapsed, inputs.blind)
         rules = self._rules(float(s[0]), float(d[0]), vessels, segs, speed, elapsed)
         stop_at = None if stop is None else stop.at_m

@@ -108,6 +108,10 @@ class NmpcConfig:
     segment_range_m: float = 50.0  # segments farther than this are left out
     vessel_slots: int = 4  # other vessels avoided over the horizon (`vessel_slots`)
     vessel_separation_m: float = 2.0  # d_v: kept beyond R_b from a vessel's (inflated) hull
+    # a vessel at rest (`Track.vessel`, not moving) is a wall grown by this: its d_p may go
+    # to the slack like a wall's, and the hull circles reach 0.6 m past the hull's corners,
+    # so the hulls keep 2 m (0: its sides are walls like any others')
+    rest_keep_m: float = 1.5
     # how much a vessel's predicted hull may widen with its track's uncertainty over the
     # horizon (its length may grow up to 6 m): in a canal a vessel keeps its side
     vessel_lateral_inflation_m: float = 1.0
@@ -163,7 +167,7 @@ class NmpcConfig:
         ):
             bad("terminal_factor", "must be a non-negative number or None")
         for name in ("slack_weight", "separation_m", "hessian_regularisation",
-                     "vessel_separation_m", "vessel_lateral_inflation_m"):
+                     "vessel_separation_m", "vessel_lateral_inflation_m", "rest_keep_m"):
             if getattr(self, name) < 0:
                 bad(name, "must not be negative")
         if self.blind_speed_mps is not None and self.blind_speed_mps < 0:

@@ -178,3 +178,44 @@ def vessel_slot_margin(px, py, slot, margin):
     return float(super_ellipse_margin(px, py, x, y, theta, length, margin,
                                       width / 2 + margin))
 
+
+
+REST_MPS = 0.15  # a vessel not moving is at rest below this speed (a track's noise above)
+
+
+def at_rest(tracks) -> tuple:
+    """The vessels among `tracks` lying at rest: known for vessels (a kayak stopped, a boat
+    waiting; `Track.vessel`), not moving, and slower than `REST_MPS` (a slow barge whose
+    track reads below the moving test a while is not stopping)."""
+    return tuple(tr for tr in tracks if not getattr(tr, "moving", True)
+                 and getattr(tr, "vessel", False)
+                 and float(np.hypot(*np.asarray(tr.velocity, float).reshape(2))) < REST_MPS)
+
+
+def rest_outlines(tracks, grow_m: float, circles=None, radius_m: float = 0.0) -> np.ndarray:
+    """The outlines of vessels at rest, each side moved out by `grow_m`, as (4 K, 4)
+    segments (x_c, y_c, theta, length): walls the hull circles keep d_p from, slack and
+    all, so the hulls keep `grow_m` plus the circles' reach past the hull. Never grown over
+    the boat's hull circles (`circles` (n, 2), `radius_m`): a vessel that stops (or whose
+    track stops a moment) beside the boat must not put a wall on it."""
+    rows = []
+    for tr in tracks:
+        x, y = np.asarray(tr.position, float).reshape(2)
+        c, s = np.cos(tr.heading_rad), np.sin(tr.heading_rad)
+        half_l, half_w = 0.5 * float(tr.length_m), 0.5 * float(tr.width_m)
+        grow = grow_m
+        if circles is not None:  # the circles' least distance to the outline, less R_b
+            rel = np.asarray(circles, float).reshape(-1, 2) - (x, y)
+            out_l = np.maximum(np.abs(rel @ (c, s)) - half_l, 0.0)
+            out_w = np.maximum(np.abs(rel @ (-s, c)) - half_w, 0.0)
+            grow = min(grow_m, max(float(np.hypot(out_l, out_w).min()) - radius_m, 0.0))
+        half_l, half_w = half_l + grow, half_w + grow
+        for along, across, theta, length in ((half_l, 0.0, tr.heading_rad + np.pi / 2,
+                                              2 * half_w),
+                                             (-half_l, 0.0, tr.heading_rad + np.pi / 2,
+                                              2 * half_w),
+                                             (0.0, half_w, tr.heading_rad, 2 * half_l),
+                                             (0.0, -half_w, tr.heading_rad, 2 * half_l)):
+            rows.append((x + along * c - across * s, y + along * s + across * c, theta,
+                         length))
+    return np.array(rows, float).reshape(-1, 4)

@@ -189,6 +189,10 @@ class Track:
     age_s: float
     first_seen_s: float
     confirmed_s: float  # NaN while tentative
+    # known for a vessel: seen under way once (the tracker), or handed on as one (known
+    # walls); at rest (a kayak stopped, a boat waiting) it is still passed as a vessel,
+    # where a thing never seen moving (a moored boat, a pier) is an obstacle like a wall
+    vessel: bool = False
 
     @property
     def confirmed(self) -> bool:
@@ -201,17 +205,20 @@ class Track:
     @classmethod
     def from_truth(cls, id: int, position, velocity, heading_rad: float, length_m: float,
                    width_m: float, time_s: float = 0.0, moving_mps: float = 0.3,
-                   sigma_m: float = 0.05, sigma_mps: float = 0.02) -> "Track":
+                   sigma_m: float = 0.05, sigma_mps: float = 0.02,
+                   under_way: bool = False) -> "Track":
         """A track from a true vessel state (the known-walls perception): exact, with a small
-        covariance, confirmed; `moving` when the speed is above `moving_mps`."""
+        covariance, confirmed; `moving` when the speed is above `moving_mps`, a `vessel`
+        when moving or `under_way` before."""
         p = np.array(position, float).reshape(2)
         v = np.array(velocity, float).reshape(2)
         p.setflags(write=False)
         v.setflags(write=False)
         cov = np.diag([sigma_m ** 2, sigma_m ** 2, sigma_mps ** 2, sigma_mps ** 2])
         cov.setflags(write=False)
+        moving = bool(math.hypot(*v) > moving_mps)
         return cls(int(id), p, v, float(heading_rad), float(length_m), float(width_m), cov,
-                   bool(math.hypot(*v) > moving_mps), 1, 0, 0.0, float(time_s), float(time_s))
+                   moving, 1, 0, 0.0, float(time_s), float(time_s), moving or under_way)
 
     def as_record(self) -> dict:
         """Plain numbers for a log row (JSON-ready)."""
@@ -221,7 +228,8 @@ class Track:
                 "width_m": self.width_m,
                 "sigma_pos_m": float(math.sqrt(max(np.trace(self.covariance[:2, :2]), 0.0))),
                 "sigma_vel_mps": float(math.sqrt(max(np.trace(self.covariance[2:, 2:]), 0.0))),
-                "moving": self.moving, "hits": self.hits, "misses": self.misses,
+                "moving": self.moving, "vessel": self.vessel, "hits": self.hits,
+                "misses": self.misses,
                 "age_s": self.age_s, "first_seen_s": self.first_seen_s,
                 "confirmed_s": None if math.isnan(self.confirmed_s) else self.confirmed_s}
 
@@ -286,6 +294,7 @@ class _Tracked:
         self.first_seen_s = self.last_hit_s = float(time_s)
         self.confirmed_s = math.nan
         self.moving, self._votes = False, 0
+        self.vessel = False  # moving once (`Track.vessel`)
         # Clusters that closed its outline along an axis (both ends its own, `_real_ends`):
         # a hull; a piece of wall seen through a gap or at a corner goes on into the wall.
         self.hull_hits, self.hull_s = 0, -math.inf  # how many, the last one's time
@@ -357,6 +366,7 @@ class _Tracked:
             self._votes += 1
             if self._votes >= cfg.moving_hits:
                 self.moving, self._votes = passes, 0
+                self.vessel = self.vessel or passes
                 course = self._course(cfg)
                 if passes and course is not None \
                         and abs(_half_turn(course - self.axis)) > math.pi / 3:
@@ -377,7 +387,7 @@ class _Tracked:
             a.setflags(write=False)
         return Track(self.id, pos, vel, heading, float(self.extent[0]), float(self.extent[1]),
                      p, self.moving, self.hits, self.misses, float(time_s - self.first_seen_s),
-                     self.first_seen_s, self.confirmed_s)
+                     self.first_seen_s, self.confirmed_s, self.vessel)
 
 
 class VesselTracker:
@@ -592,7 +602,7 @@ class VesselTracker:
             if d <= reach and dv <= 3.0 * sv + cfg.moving_mps and lost.last_hit_s > best_d:
                 best, best_d = lost, lost.last_hit_s
         if best is not None:
-            k.id = best.id
+            k.id, k.vessel = best.id, k.vessel or best.vessel
             self._lost.remove(best)
 
     def _end_of_life(self, t: float, pose, scanned: bool) -> None:

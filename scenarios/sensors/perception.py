@@ -32,6 +32,7 @@ class KnownWalls:
         self._legs: dict = {}  # which lines are present -> their legs
         self._vessels = tuple(world.vessels)
         self._last_seen: dict[int, float] = {}  # vessel index -> when last in sight
+        self._under_way: set[int] = set()  # vessel indices that have moved (`Track.vessel`)
 
     def perceive(self, time_s, true_state, estimated_state):
         """The known walls and, extended to other boats, the true vessels as tracks; a vessel
@@ -53,7 +54,8 @@ class KnownWalls:
         """The vessels a LiDAR tracker would hand on, as tracks built from the truth: those
         within range and in sight (a corner or the middle of the hull seen past the walls and
         obstacles: nothing is seen through a building), and for the tracker's coasting time
-        (`TrackerConfig.max_coast_s`) after one goes out of sight."""
+        (`TrackerConfig.max_coast_s`) after one goes out of sight; each a `vessel` once it
+        has moved, seen or not (at rest after that, it is passed as a vessel)."""
         if not self._vessels:
             return ()
         from controller.perception.tracking import Track, TrackerConfig
@@ -61,6 +63,9 @@ class KnownWalls:
         eye = np.asarray(true_state, float)[:2]
         out = []
         for k, v in enumerate(self._vessels):
+            velocity = v.velocity_at(time_s)
+            if np.hypot(*velocity) > TrackerConfig.moving_mps:  # seen or not: the truth
+                self._under_way.add(k)
             pose = v.pose_at(time_s)
             if np.hypot(*(pose[:2] - eye)) > self.range_m + v.hull.length_m:
                 continue
@@ -68,8 +73,8 @@ class KnownWalls:
                 self._last_seen[k] = time_s
             elif time_s - self._last_seen.get(k, -np.inf) > TrackerConfig.max_coast_s:
                 continue
-            out.append(Track.from_truth(k + 1, pose[:2], v.velocity_at(time_s), pose[2],
-                                        v.hull.length_m, v.hull.beam_m))
+            out.append(Track.from_truth(k + 1, pose[:2], velocity, pose[2], v.hull.length_m,
+                                        v.hull.beam_m, under_way=k in self._under_way))
         return tuple(out)
 
     def _in_sight(self, time_s, eye, points) -> bool:

@@ -165,3 +165,25 @@ def test_no_vessel_slots_is_the_paper_s_problem():
     st = ctl.step([0, 0, 0, 2, 0, 0], [47, 0], np.zeros((0, 4)), [[0, 0], [100, 0]], 2.0,
                   vessels=[vessel_at(0.0, (40.0, 0.0), (-1.0, 0.0))])
     assert st.stats.ok and st.stats.vessels == ()
+
+
+def test_a_vessel_at_rest_is_a_wall_grown_all_round():
+    """A track known for a vessel but not moving (a kayak stopped) becomes its outline with
+    every side moved out by the keep: a rectangle (length + 2 k) x (width + 2 k)."""
+    from types import SimpleNamespace
+
+    from controller.nmpc.vessel_slots import at_rest, rest_outlines
+
+    kayak = SimpleNamespace(position=np.array([10.0, 2.0]), velocity=np.zeros(2),
+                            heading_rad=math.pi / 2, length_m=3.5, width_m=0.8, moving=False,
+                            vessel=True)
+    quay_piece = SimpleNamespace(**{**vars(kayak), "vessel": False})
+    launch = SimpleNamespace(**{**vars(kayak), "moving": True})
+    assert at_rest([kayak, quay_piece, launch]) == (kayak,)
+    segs = rest_outlines([kayak], 1.5)
+    assert segs.shape == (4, 4)
+    c, s = np.cos(segs[:, 2]), np.sin(segs[:, 2])
+    ends = np.vstack([segs[:, :2] - 0.5 * segs[:, 3:4] * np.column_stack([c, s]),
+                      segs[:, :2] + 0.5 * segs[:, 3:4] * np.column_stack([c, s])])
+    np.testing.assert_allclose(ends.min(axis=0), [10.0 - 1.9, 2.0 - 3.25], atol=1e-9)
+    np.testing.assert_allclose(ends.max(axis=0), [10.0 + 1.9, 2.0 + 3.25], atol=1e-9)

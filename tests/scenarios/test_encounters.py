@@ -62,15 +62,33 @@ def test_a_plan_that_holds_the_boat_at_rest_is_made_again_from_the_reference(tmp
     """A kayak stopped across half a narrow canal, the boat come up to it behind a barge
     (fuzz seed 1 case 47, known walls): the real-time iteration's plan held the boat at rest
     beside the gap for the rest of the run; planned again from the reference once it had
-    for 5 s, the boat goes round and reaches the goal."""
-    scenario = load_scenario(
-        REGRESSIONS / "boat_held_at_rest_behind_a_kayak_stopped_across_the_canal.toml")
+    for 5 s, the boat goes round and reaches the goal. (With the kayak's sides walls like
+    any others, `rest_keep_m` 0: grown by 1.5 m it leaves no way past, and the boat waits.)"""
+    scenario = with_options(load_scenario(
+        REGRESSIONS / "boat_held_at_rest_behind_a_kayak_stopped_across_the_canal.toml"),
+        rest_keep_m=0.0)
     summary = run_scenario(scenario, tmp_path, plots=False).summary
     assert summary["elastic"]["restarts"] >= 1
     assert not check_criteria(scenario, summary)
     off = with_options(scenario, restart_stuck_s=0.0)
     summary = run_scenario(off, tmp_path / "off", plots=False).summary
     assert not summary["reached_goal"], summary["status"]
+
+
+def test_a_kayak_at_rest_is_passed_2_m_off_hull_to_hull(tmp_path):
+    """A kayak stopped in a bend, passed as the boat follows a barge round it (fuzz seed 1
+    case 53, known walls): as a wall like the quay, the slack gave up all of d_p to it and
+    the hulls came 1.79 m apart; as a wall grown by `rest_keep_m`, 2 m or more."""
+    scenario = load_scenario(
+        REGRESSIONS / "kayak_stopped_in_a_bend_beside_a_barge_followed.toml")
+    summary = run_scenario(scenario, tmp_path, plots=False).summary
+    assert summary["reached_goal"] and not summary["collision"], summary["status"]
+    kayak = next(v for v in summary["vessels"] if v["name"] == "drifting-0")
+    assert kayak["min_hull_distance_m"] >= 2.0, kayak
+    assert not check_criteria(scenario, summary)
+    off = with_options(scenario, rest_keep_m=0.0)
+    summary = run_scenario(off, tmp_path / "off", plots=False).summary
+    assert check_criteria(off, summary)
 
 
 @pytest.mark.slow
