@@ -253,7 +253,9 @@ def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed
         stop = at if stop is None else min(stop, at)
         reasons.append(f"following {tr.id}: {why}")
     # the nearest vessel overtaken sets the side (passed on its starboard side while meeting
-    # one: out to starboard at least as far as the meeting asks)
+    # one: out to starboard at least as far as the meeting asks); none beyond one followed
+    followed = [e.distance_m for e in encounters if e.kind == "following"]
+    pass_offsets = [p for p in pass_offsets if not followed or p[0] < min(followed)]
     offset = min(pass_offsets)[1] if pass_offsets else 0.0
     offset = max(meet_offset, offset) if meet_offset else offset
     if speed_cap is not None:

@@ -78,17 +78,22 @@ def test_a_plan_that_holds_the_boat_at_rest_is_made_again_from_the_reference(tmp
 def test_a_kayak_at_rest_is_passed_2_m_off_hull_to_hull(tmp_path):
     """A kayak stopped in a bend, passed as the boat follows a barge round it (fuzz seed 1
     case 53, known walls): as a wall like the quay, the slack gave up all of d_p to it and
-    the hulls came 1.79 m apart; as a wall grown by `rest_keep_m`, 2 m or more."""
+    the hulls came 1.79 m apart; as a wall grown by `rest_keep_m`, 2 m or more, and farther
+    by most of the 1.5 m than with its sides walls like any others (`rest_keep_m` 0)."""
     scenario = load_scenario(
         REGRESSIONS / "kayak_stopped_in_a_bend_beside_a_barge_followed.toml")
-    summary = run_scenario(scenario, tmp_path, plots=False).summary
-    assert summary["reached_goal"] and not summary["collision"], summary["status"]
-    kayak = next(v for v in summary["vessels"] if v["name"] == "drifting-0")
-    assert kayak["min_hull_distance_m"] >= 2.0, kayak
+
+    def kayak_distance(scenario, out):
+        summary = run_scenario(scenario, out, plots=False).summary
+        assert summary["reached_goal"] and not summary["collision"], summary["status"]
+        return next(v for v in summary["vessels"]
+                    if v["name"] == "drifting-0")["min_hull_distance_m"], summary
+
+    grown, summary = kayak_distance(scenario, tmp_path)
+    assert grown >= 2.0
     assert not check_criteria(scenario, summary)
-    off = with_options(scenario, rest_keep_m=0.0)
-    summary = run_scenario(off, tmp_path / "off", plots=False).summary
-    assert check_criteria(off, summary)
+    plain, _ = kayak_distance(with_options(scenario, rest_keep_m=0.0), tmp_path / "off")
+    assert grown - plain >= 0.75, (grown, plain)
 
 
 @pytest.mark.slow
