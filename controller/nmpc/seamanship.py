@@ -19,7 +19,12 @@ rules decide where the reference asks it to be, so that it passes the way other 
   side a vessel given way to is crossing to (Rule 15: the boat passes astern of it). With no
   such side, or a bend of more than `bend_deg` before the boat would be past it (Rule 9(f):
   what comes round the bend is not seen), follow it: no faster than it goes, and stop short
-  of it by `follow_gap_m` (its stern to our bow).
+  of it by `follow_gap_m` (its stern to our bow). The farthest vessel is decided first: one
+  close behind another (no room to pull in between) is passed on that one's side or followed
+  with it, and no pass beyond a vessel followed moves the reference. A side chosen is kept
+  while its room stays within `keep_side_m` (Rule 8: a track's noise does not switch the boat
+  between sides, or between passing and following); a pass on the vessel's starboard side
+  goes on while a vessel is met (it is out of that vessel's lane), one on its port side stops.
 - Crossing (Rule 15): a vessel that will cross the route ahead from the starboard side while
   the boat would be there is given way to by slowing: the reference stops short of the
   crossing point until the vessel has cleared it (passing astern of it). A small craft
