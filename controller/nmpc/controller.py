@@ -313,6 +313,7 @@ class NmpcController:
         self._way.reset()
         self._rules_stop: Shaping | None = None
         self._giving_way: frozenset = frozenset()  # track ids given way to last period
+        self._overtaking: dict = {}  # track id: the side overtaken on last period
         self._restart_rest = 0  # steps left before another restart from the reference
         self._stuck_s = 0.0  # how long the plan has held the boat at rest (`_stuck`)
         self._elastic: tuple | None = None  # this step's rows' violation, if a restart chose
@@ -632,11 +633,11 @@ class NmpcController:
     def _memory(self) -> tuple:
         """What `_setup` moves on, to be put back when a prepared setup goes unused."""
         return (self._way.memory(), self._rules_stop, self._rules_clear_s, self._slots_prev,
-                self._giving_way)
+                self._giving_way, self._overtaking)
 
     def _restore(self, memory: tuple) -> None:
         (way, self._rules_stop, self._rules_clear_s, self._slots_prev,
-         self._giving_way) = memory
+         self._giving_way, self._overtaking) = memory
         self._way.restore(way)
 
     def _rules(self, s: float, d: float, vessels, segments, speed_mps: float,
@@ -651,9 +652,12 @@ class NmpcController:
                            hull_radius_m=c.hull_radius_m,
                            separation_m=c.separation_m,
                            vessel_separation_m=c.vessel_separation_m, bow_m=c.bow_m,
-                           follow_gap_m=c.follow_gap_m, give_way_to=self._giving_way)
+                           follow_gap_m=c.follow_gap_m, give_way_to=self._giving_way,
+                           sight_m=c.sight_m, oncoming_mps=c.oncoming_mps,
+                           oncoming_room_m=c.oncoming_room_m, overtaking=self._overtaking)
         self._giving_way = frozenset(e.track_id for e in rules.encounters
                                      if e.kind in ("give_way", "stand_on_acts"))
+        self._overtaking = {e.track_id: e.side for e in rules.encounters if e.side}
         if rules.stop_at_m is not None:
             self._rules_stop, self._rules_clear_s = rules, 0.0
         elif self._rules_stop is not None:

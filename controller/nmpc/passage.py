@@ -237,8 +237,12 @@ class WayAhead:
 
     def __init__(self, min_passage_m: float, stop_short_m: float, decel_mps2: float,
                  resume_after_s: float, sweep_every_s: float = 0.5,
-                 clearance_m: float | None = None):
+                 clearance_m: float | None = None, reopen_m: float = 0.5):
         self.min_passage_m = min_passage_m
+        # a way found blocked is open again only for a gap this much wider: a gap about the
+        # hull's width, read a little wider or narrower by each scan, does not stop and start
+        # the boat in turn (open while it approaches, blocked when it gets there)
+        self.reopen_m = reopen_m
         self.clearance_m = clearance_m  # from a gap's sides to the boat's line (`sweep`)
         self.stop_short_m = stop_short_m  # from the obstruction to the boat's origin
         self.decel_mps2 = decel_mps2
@@ -275,7 +279,8 @@ class WayAhead:
             if self._since_sweep < self.sweep_every_s - 1e-9:
                 return self._stop  # as at the last sweep (1 m at 2 m/s)
         elapsed, self._since_sweep = self._since_sweep or 0.0, 0.0
-        at, self.channel = sweep(path, progress_m, offset_m, segments, self.min_passage_m,
+        widest = self.min_passage_m + (self.reopen_m if self._stop is not None else 0.0)
+        at, self.channel = sweep(path, progress_m, offset_m, segments, widest,
                                  lookahead_m, clearance_m=self.clearance_m)
         if at is not None:
             self._clear_s = 0.0

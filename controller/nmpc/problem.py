@@ -117,6 +117,12 @@ class NmpcConfig:
     vessel_lateral_inflation_m: float = 1.0
     colreg: bool = True  # shape the reference by the rules of the road (`seamanship`)
     follow_gap_m: float = 20.0  # behind a vessel there is no room to overtake: bow to its stern
+    # Overtaking in the lane of vessels coming the other way (`seamanship`): only where the
+    # channel leaves them room too, or the way is seen clear this far ahead (the perception's
+    # reach; inf: no such rule) for one coming unseen at oncoming_mps
+    sight_m: float = 50.0
+    oncoming_mps: float = 2.5
+    oncoming_room_m: float = 5.0  # its beam and its way off the wall
     bow_m: float = 3.95  # from the boat's origin to its bow (the 7.9 m hull)
     smooth_eps: float = SMOOTH.eps  # of the smooth |z| in the prediction model
     hessian_regularisation: float = 1e-6  # on zero diagonal weights (v, nT, nS, sigma)
@@ -172,7 +178,8 @@ class NmpcConfig:
                 bad(name, "must not be negative")
         if self.blind_speed_mps is not None and self.blind_speed_mps < 0:
             bad("blind_speed_mps", "must be a speed >= 0 (0 or None: no blind-opening rule)")
-        for name in ("stop_margin_m", "resume_after_s", "blind_margin_m"):
+        for name in ("stop_margin_m", "resume_after_s", "blind_margin_m", "sight_m",
+                     "oncoming_mps", "oncoming_room_m"):
             if getattr(self, name) < 0:
                 bad(name, "must not be negative")
         for name in ("step_s", "control_period_s", "nT_max", "nS_max", "dnT_max", "dnS_max",

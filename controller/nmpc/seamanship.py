@@ -11,12 +11,20 @@ rules decide where the reference asks it to be, so that it passes the way other 
   `vessel_slots`), so the plan moves over in time and keeps to its side instead of backing
   away from a vessel it can pass.
 - Overtaking (Rules 9(e) and 13): a slower vessel ahead going the same way: pass it on its port
-  side where the channel leaves room beside it (two hull circles and both separations, 2 R_b
-  + d_v + d_p), else on its starboard side, never on the side a vessel given way to is
-  crossing to (Rule 15: the boat passes astern of it); with room on neither, or a bend of
-  more than `bend_deg` before the boat would be past it (Rule 9(f): what comes round the
-  bend is not seen), follow it: no faster than it goes, and stop short of it by
-  `follow_gap_m` (its stern to our bow).
+  side where the channel there leaves room for the boat and for a vessel coming the other
+  way too (2 R_b + 2 d_v + `oncoming_room_m`), else on its starboard side where that leaves
+  the boat room (2 R_b + d_v + d_p: out of the lane of anyone coming the other way), else on
+  its port side only if the channel is seen clear far enough (`sight_m`) that nothing unseen
+  coming the other way at `oncoming_mps` can be there before the boat is past; never on the
+  side a vessel given way to is crossing to (Rule 15: the boat passes astern of it). With no
+  such side, or a bend of more than `bend_deg` before the boat would be past it (Rule 9(f):
+  what comes round the bend is not seen), follow it: no faster than it goes, and stop short
+  of it by `follow_gap_m` (its stern to our bow). The farthest vessel is decided first: one
+  close behind another (no room to pull in between) is passed on that one's side or followed
+  with it, and no pass beyond a vessel followed moves the reference. A side chosen is kept
+  while its room stays within `keep_side_m` (Rule 8: a track's noise does not switch the boat
+  between sides, or between passing and following); a pass on the vessel's starboard side
+  goes on while a vessel is met (it is out of that vessel's lane), one on its port side stops.
 - Crossing (Rule 15): a vessel that will cross the route ahead from the starboard side while
   the boat would be there is given way to by slowing: the reference stops short of the
   crossing point until the vessel has cleared it (passing astern of it). A small craft
@@ -60,6 +68,7 @@ class Encounter:
     # it (d_v beside it, R_b to the wall: `lane_room`), so its lane counts as taken for the
     # whole horizon (`vessel_slots`); without room the boat holds back from its hull
     lane: bool = False
+    side: str = ""  # overtaking: the vessel's side the boat passes it on (port | starboard)
 
 
 @dataclass(frozen=True)
@@ -77,12 +86,20 @@ def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed
            segments, *, hull_radius_m: float, separation_m: float, vessel_separation_m: float,
            bow_m: float, follow_gap_m: float = 20.0, lookahead_m: float = 70.0,
            small_craft_m: float = 6.0, bend_deg: float = 20.0,
-           give_way_to: frozenset = frozenset(), act_decel_mps2: float = 0.15) -> Shaping:
+           give_way_to: frozenset = frozenset(), act_decel_mps2: float = 0.15,
+           sight_m: float = math.inf, oncoming_mps: float = 2.5,
+           oncoming_room_m: float = 5.0, overtaking: dict | None = None,
+           keep_side_m: float = 1.0) -> Shaping:
     """The reference shaping for the tracked vessels (`perception.tracking.Track`-like:
     position, velocity, length_m, width_m, id); segments give the channel's walls;
     `give_way_to`: ids the boat gave way to (or stood on for and then acted) at the last
     period; `act_decel_mps2`: the boat's hardest braking, which sets how late a stand-on
-    vessel may keep its course and speed (Rule 17(b))."""
+    vessel may keep its course and speed (Rule 17(b)); `sight_m`: how far ahead a vessel is
+    seen (the perception's reach), `oncoming_mps` and `oncoming_room_m`: the speed and the
+    room across (beam and its way off the wall) of a vessel coming the other way unseen;
+    `overtaking`: {track id: side} the boat was overtaking on at the last period, a side kept
+    while its room stays within `keep_side_m` of what choosing it asks (Rule 8: a track's
+    noise does not switch the boat from side to side or between passing and following)."""
     if not tracks:
         return Shaping()
     segs = np.asarray(segments, float).reshape(-1, 4)
@@ -159,51 +176,93 @@ def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed
             continue
         elif ahead > 0 and along < speed_mps - 0.3:
             kind = "overtaking"  # or following, decided below
+            # the channel beside the vessel, measured from just outside its sides (the
+            # LiDAR's lines on its own hull are no wall beside it)
             xy_v, _ = path.at(s)
-            port, stbd = _room(xy_v, heading, 0.0, segs)  # the channel abeam of the vessel
-            port = port if math.isfinite(port) else here()[0]  # not seen there yet: as here
-            stbd = stbd if math.isfinite(stbd) else here()[1]
-            overtakes.append((tr, s, d, half_len, half_wid, along,
-                              (d - half_wid) + port, stbd - (d + half_wid), len(encounters),
-                              port, stbd))
+            edge = 0.5
+            port_gap, stbd_gap = _beside(xy_v, heading, d - half_wid - edge,
+                                         d + half_wid + edge, segs)
+            port_gap = edge + port_gap if math.isfinite(port_gap) else (
+                (d - half_wid) + here()[0])  # not seen there yet: as here
+            stbd_gap = edge + stbd_gap if math.isfinite(stbd_gap) else (
+                here()[1] - (d + half_wid))
+            overtakes.append((tr, s, d, half_len, half_wid, along, port_gap, stbd_gap,
+                              len(encounters), port_gap - (d - half_wid),
+                              stbd_gap + (d + half_wid)))
         encounters.append(Encounter(tr.id, kind, ahead))
-    # Overtake only with room beside the vessel, nobody coming the other way, and the
-    # channel straight until the boat is past (Rule 9(f): round a bend a vessel coming the
-    # other way is out of sight until it is there).
+    # Overtake only with room beside the vessel, nobody coming the other way in the lane the
+    # boat takes, and the channel straight until the boat is past (Rule 9(f): round a bend a
+    # vessel coming the other way is out of sight until it is there). The farthest vessel
+    # is decided first: one close behind another (no room to pull in between them) is
+    # passed on the same side as that one, or followed with it.
     need = 2 * Rb + dv + dp
-    for tr, s, d, half_len, half_wid, along, port_gap, stbd_gap, k, port, stbd in overtakes:
-        side = None
+    three_abreast = 2 * Rb + 2 * dv + oncoming_room_m  # the boat and one coming the other way
+    room_between = 2.0 * (bow_m + follow_gap_m)  # to pull in between two vessels
+    ahead_of = None  # (its stern's arc length, the side it is passed on or None) so far
+    for tr, s, d, half_len, half_wid, along, port_gap, stbd_gap, k, port, stbd in sorted(
+            overtakes, key=lambda o: -o[1]):
+        side, why = None, "no room to overtake"
         past = (s - progress_m) + half_len + bow_m + follow_gap_m  # to be clear ahead of it
-        travel = speed_mps * past / max(speed_mps - along, 0.1)  # the boat's way meanwhile
+        duration = past / max(speed_mps - along, 0.1)
+        travel = speed_mps * duration  # the boat's way meanwhile
+        # nothing coming the other way can reach the boat's way before it is past: the
+        # channel is seen clear beyond where it will be by what such a vessel makes meanwhile
+        seen_clear = travel + oncoming_mps * duration <= sight_m
         alongside = (s - progress_m) - half_len < bow_m  # its stern behind our bow: go on
+        before = (overtaking or {}).get(tr.id)
+        # on its port side the boat is in the lane of whatever comes the other way: only
+        # where there is room for that vessel too, or none can come unseen (or the boat is
+        # beside it already, where going on is the shorter way out of that lane); a side
+        # chosen is kept while its room stays within keep_side_m of what choosing it asks
+        give = keep_side_m if before == "port" else 0.0
+        port_ok = (port_gap >= need - give and -1.0 not in heading_to
+                   and (port_gap >= three_abreast - give or seen_clear or alongside))
+        # on its starboard side the boat keeps out of that lane
+        stbd_ok = (stbd_gap >= need - (keep_side_m if before == "starboard" else 0.0)
+                   and 1.0 not in heading_to)
+        chained = ahead_of is not None and ahead_of[0] - (s + half_len) < room_between
         if not alongside and not _straight(path, progress_m,
                                            progress_m + min(travel, 2 * lookahead_m),
                                            math.radians(bend_deg)):
-            encounters[k] = Encounter(tr.id, "following", encounters[k].distance_m)
-            speed_cap = along if speed_cap is None else min(speed_cap, along)
-            at = s - half_len - bow_m - follow_gap_m
-            stop = at if stop is None else min(stop, at)
-            reasons.append(f"following {tr.id}: a bend ahead before the boat would be past")
-            continue
-        # never across the way of a vessel given way to: not to the side it is crossing to
-        # (Rule 15: pass astern of it, so on the side it comes from)
-        if meet_offset == 0.0 and port_gap >= need and -1.0 not in heading_to:
-            side, target = "port", max(d - half_wid - dv - Rb, -(port - Rb - dp))
-        elif meet_offset == 0.0 and stbd_gap >= need and 1.0 not in heading_to:
-            side, target = "starboard", min(d + half_wid + dv + Rb, stbd - Rb - dp)
+            why = "a bend ahead before the boat would be past"
+        elif chained and ahead_of[1] is None and not alongside:
+            why = "a vessel close ahead of it is followed"
+        elif meet_offset != 0.0 and not (stbd_ok and (before == "starboard" or offset_m > d)):
+            why = "no room to overtake with a vessel coming the other way"
+        elif meet_offset != 0.0:
+            side = "starboard"  # on its starboard side, out of the lane of the vessel met
+        elif chained:  # the vessel close ahead's side, if this one leaves room on it
+            side = ahead_of[1] if (port_ok if ahead_of[1] == "port" else stbd_ok) else None
+        elif alongside and offset_m > d and stbd_ok:
+            side = "starboard"  # beside it already: on the side the boat is on
+        elif port_ok and (port_gap >= three_abreast or alongside or before == "port"):
+            side = "port"
+        elif stbd_ok:
+            side = "starboard"
+        elif port_ok:
+            side = "port"
+        if side is None and why == "no room to overtake":
+            why += (" clear of a vessel crossing" if heading_to else
+                    " with the way ahead seen too short" if port_gap >= need else "")
+        ahead_of = (s - half_len, side)
         if side is not None:
-            pass_offsets.append(target)
+            target = (max(d - half_wid - dv - Rb, -(port - Rb - dp)) if side == "port" else
+                      min(d + half_wid + dv + Rb, stbd - Rb - dp))
+            pass_offsets.append((s - progress_m, target))
             reasons.append(f"overtaking {tr.id} on its {side} side")
+            encounters[k] = Encounter(tr.id, "overtaking", encounters[k].distance_m, side=side)
             continue
         encounters[k] = Encounter(tr.id, "following", encounters[k].distance_m)
         speed_cap = along if speed_cap is None else min(speed_cap, along)
         at = s - half_len - bow_m - follow_gap_m
         stop = at if stop is None else min(stop, at)
-        reasons.append(f"following {tr.id}: no room to overtake"
-                       + (" with a vessel coming the other way" if meet_offset else
-                          " clear of a vessel crossing" if heading_to else ""))
-    offset = meet_offset if meet_offset else (
-        min(pass_offsets, key=abs) if pass_offsets else 0.0)
+        reasons.append(f"following {tr.id}: {why}")
+    # the nearest vessel overtaken sets the side (passed on its starboard side while meeting
+    # one: out to starboard at least as far as the meeting asks); none beyond one followed
+    followed = [e.distance_m for e in encounters if e.kind == "following"]
+    pass_offsets = [p for p in pass_offsets if not followed or p[0] < min(followed)]
+    offset = min(pass_offsets)[1] if pass_offsets else 0.0
+    offset = max(meet_offset, offset) if meet_offset else offset
     if speed_cap is not None:
         speed_cap = max(speed_cap, 0.0)
     return Shaping(offset, speed_cap, stop, "; ".join(reasons), tuple(encounters))
@@ -236,6 +295,17 @@ def _room(xy, heading, offset_m, segs) -> tuple[float, float]:
         pts = pts + offset_m * np.column_stack([-np.sin(h), np.cos(h)])
     port, stbd = walls_abeam(pts, h, segs)
     return float(port[0]), float(stbd[0])
+
+
+def _beside(xy, heading, port_edge_m, stbd_edge_m, segs) -> tuple[float, float]:
+    """Distance to the wall abeam to port of the path point moved `port_edge_m` across, and
+    to starboard of it moved `stbd_edge_m` across (inf: none seen)."""
+    pts = np.asarray(xy, float).reshape(1, 2)
+    h = float(np.asarray(heading, float).reshape(-1)[0])
+    normal = np.array([-math.sin(h), math.cos(h)])
+    port, stbd = walls_abeam(pts + np.outer((port_edge_m, stbd_edge_m), normal),
+                             np.array([h, h]), segs)
+    return float(port[0]), float(stbd[1])
 
 
 def _crossing(d: float, along: float, across: float, half_wid: float) -> bool:

@@ -22,7 +22,7 @@ from typing import Callable, Protocol
 
 import numpy as np
 
-from controller.geometry import Polyline
+from controller.geometry import Polyline, point_segment_distance
 from controller.navigation import NavigationFilter
 from controller.nmpc.passage import waiting_kind
 from controller.perception.feed import FeedConfig, SegmentFeed
@@ -132,6 +132,10 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
     timer = _Timer()
     path = Polyline(cfg.waypoints)
     goal = np.asarray(cfg.waypoints, float)[-1]
+    # the goal is reached within goal_radius_m of it or past its finish line (square to the
+    # last leg through it), as ArduPilot's waypoint navigation counts a waypoint passed: a
+    # boat kept off the line by another vessel passes it abeam and would otherwise go on
+    finish = _finish_direction(cfg.waypoints)
     n_imu = max(1, int(round(cfg.control_period_s / cfg.imu_period_s)))
     gps_every = max(1, int(round(1.0 / (cfg.gps.rate_hz * cfg.imu_period_s))))
     n_steps = int(math.floor(cfg.duration_s / cfg.control_period_s + 1e-9))
@@ -292,7 +296,8 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
             except PlantFailure as exc:  # e.g. a lost MAVLink link: what was logged stays
                 status = f"plant failed: {exc}"
                 break
-            if np.hypot(*(out.state[:2] - goal)) <= cfg.goal_radius_m:
+            if (np.hypot(*(out.state[:2] - goal)) <= cfg.goal_radius_m
+                    or _past_finish(out.state[:2], cfg.waypoints, finish)):
                 status, reached = "reached goal", True
                 break
             if progress is not None:
@@ -443,3 +448,25 @@ def terminal_events(redraw: bool, stream=sys.stderr) -> Callable[[float, str], N
         stream.flush()
 
     return say
+
+
+def _past_finish(position, waypoints, finish) -> bool:
+    """The boat is past the finish line and on the last leg (nearer it than any other: a
+    route that doubles back does not end where an earlier leg passes behind the goal)."""
+    pts = np.asarray(waypoints, float).reshape(-1, 2)
+    if float(np.dot(position - pts[-1], finish)) <= 0.0:
+        return False
+    if len(pts) < 3:
+        return True
+    d = point_segment_distance(np.asarray(position, float).reshape(1, 2), pts[:-1], pts[1:])
+    return bool(np.argmin(np.asarray(d).reshape(-1)) == len(pts) - 2)
+
+
+def _finish_direction(waypoints) -> np.ndarray:
+    """The last leg's unit direction (zeros for a route of one point: no finish line)."""
+    pts = np.asarray(waypoints, float).reshape(-1, 2)
+    if len(pts) < 2:
+        return np.zeros(2)
+    leg = pts[-1] - pts[-2]
+    norm = float(np.hypot(*leg))
+    return leg / norm if norm > 0 else np.zeros(2)

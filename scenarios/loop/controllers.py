@@ -30,6 +30,16 @@ class LosPidController:
         return Decision(command=command, segments_used=np.empty((0, 4)))
 
 
+def _sight_m(scenario) -> float:
+    """How far ahead the scenario's perception sees another vessel: the range known walls
+    hand vessels over at, or the LiDAR detector's crop."""
+    if scenario.perception == "known-walls":
+        return float(scenario.known_walls_range_m)
+    from controller.perception.detection import DetectionConfig
+
+    return float(DetectionConfig().range_m)
+
+
 class NmpcController:
     """The paper's NMPC (controller.nmpc.NmpcController) on the scenario's waypoints and d_p.
 
@@ -62,6 +72,7 @@ class NmpcController:
                 raise InputError(f"{scenario.path or scenario.name}: field 'controller.options.{key}': "
                                  f"unknown NMPC option (known: method, knows_current, {', '.join(sorted(known))})")
         options = {k: tuple(v) if isinstance(v, list) else v for k, v in options.items()}
+        options.setdefault("sight_m", _sight_m(scenario))
         config = NmpcConfig(separation_m=scenario.d_p_m, boat=scenario.controller_params, **options)
         self.core = Core(config, method=method)
         self.name = "nmpc" if method == "rti" else f"nmpc-{method}"

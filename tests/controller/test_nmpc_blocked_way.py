@@ -119,6 +119,24 @@ def test_the_way_ahead_resumes_only_after_it_stayed_clear():
     assert blind.reason.startswith("blind") and blind.at_m == pytest.approx(100.0 + 1.44 / 0.12)
 
 
+def test_a_way_found_blocked_opens_again_only_for_a_gap_wider_by_the_reopen_margin():
+    """A gap about the hull's width, read 6.2 m by one scan and 5.9 m by the next, stops
+    the boat once and keeps it stopped (no stop and go); 6.6 m opens it again."""
+    def gap(width):
+        return np.vstack([WALLS, [across(140.0, -8.0, 8.0 - width)]])
+
+    way = WayAhead(6.0, 8.0, 0.06, resume_after_s=0.0, sweep_every_s=0.0)
+    assert way.update(PATH, 100.0, 0.0, 2.0, gap(6.2), False, 0.1, 60.0) is None
+    assert way.update(PATH, 100.0, 0.0, 2.0, gap(5.9), False, 0.1, 60.0) is not None
+    held = [way.update(PATH, 100.0, 0.0, 0.0, gap(w), False, 0.1, 60.0)
+            for w in (6.2, 5.9, 6.3, 6.1)]
+    assert all(h is not None for h in held)
+    assert way.update(PATH, 100.0, 0.0, 0.0, gap(6.6), False, 0.1, 60.0) is None
+    plain = WayAhead(6.0, 8.0, 0.06, resume_after_s=0.0, sweep_every_s=0.0, reopen_m=0.0)
+    plain.update(PATH, 100.0, 0.0, 2.0, gap(5.9), False, 0.1, 60.0)
+    assert plain.update(PATH, 100.0, 0.0, 0.0, gap(6.2), False, 0.1, 60.0) is None
+
+
 def test_passage_settings_are_checked():
     for name in ("min_passage_m", "stop_decel_mps2"):
         with pytest.raises(InputError, match=name):

@@ -125,3 +125,58 @@ def test_no_overtaking_pass_on_the_side_a_vessel_given_way_to_is_crossing_to():
     kinds = {e.track_id: e.kind for e in to_stbd.encounters}
     assert kinds == {1: "overtaking", 2: "give_way"}
     assert to_stbd.offset_m < 0.0
+
+
+def _overtake(tracks, **options):
+    path, segs = _channel(((0, 0), (300, 0)))
+    shaping = assess(tracks, path, 0.0, 0.0, 2.0, segs, hull_radius_m=2.0, separation_m=2.0,
+                     vessel_separation_m=2.0, bow_m=2.0, **options)
+    return {e.track_id: (e.kind, e.side) for e in shaping.encounters}, shaping
+
+
+def test_a_port_pass_in_the_lane_of_oncoming_vessels_needs_the_way_seen_clear():
+    """Rules 9(e) and 13 in a channel too narrow for three abreast (fuzz seed 1, case 77: a
+    tour boat came round a bend into the overtaking boat): a launch 4 m to starboard leaves
+    12.9 m on its port side, less than the boat and a vessel coming the other way need
+    (2 R_b + 2 d_v + 5 m = 13 m). Seen 50 m ahead, an unseen vessel at 2.5 m/s could meet
+    the boat before it is past, so it follows; seen 500 m ahead it overtakes."""
+    launch = Track(3, (30.0, 4.0), (0.8, 0.0))
+    kinds, short = _overtake([launch], sight_m=50.0)
+    assert kinds == {3: ("following", "")}
+    assert "seen too short" in short.reason and short.speed_mps == pytest.approx(0.8)
+    kinds, far = _overtake([launch], sight_m=500.0)
+    assert kinds == {3: ("overtaking", "port")} and far.offset_m < 0.0
+
+
+def test_a_vessel_in_mid_channel_is_overtaken_on_its_starboard_side_out_of_that_lane():
+    """A launch in mid-channel leaves 8.9 m on either side: room for the boat, not for a
+    vessel coming the other way beside it too. With 50 m seen ahead the boat passes it on
+    its starboard side, out of the lane of anything coming the other way."""
+    kinds, shaping = _overtake([Track(3, (30.0, 0.0), (0.8, 0.0))], sight_m=50.0)
+    assert kinds == {3: ("overtaking", "starboard")} and shaping.offset_m > 0.0
+
+
+def test_a_vessel_close_behind_one_that_is_followed_is_followed_too():
+    """A launch 13 m behind a barge that fills the channel: past the launch the boat would
+    be stuck beside or behind the barge with no room to pull in, so it follows both."""
+    launch = Track(1, (30.0, 4.0), (0.8, 0.0))
+    barge = Track(2, (50.0, 0.0), (0.6, 0.0), length_m=7.0, width_m=8.0)
+    kinds, shaping = _overtake([launch, barge])
+    assert kinds == {1: ("following", ""), 2: ("following", "")}
+    assert "a vessel close ahead of it is followed" in shaping.reason
+    kinds, _ = _overtake([launch])
+    assert kinds == {1: ("overtaking", "port")}
+
+
+def test_a_side_chosen_for_overtaking_is_kept_through_a_track_s_noise():
+    """A 5 m wide vessel in mid-channel leaves 7.5 m either side, less than the 8 m a pass
+    needs: not overtaken. Already overtaking it on its starboard side (its track read
+    narrower a moment ago), the boat keeps that side while the room stays within
+    `keep_side_m` of it (Rule 8: no switching between passing and following)."""
+    wide = Track(3, (30.0, 0.0), (0.8, 0.0), width_m=5.0)
+    kinds, _ = _overtake([wide], sight_m=50.0)
+    assert kinds == {3: ("following", "")}
+    kinds, shaping = _overtake([wide], sight_m=50.0, overtaking={3: "starboard"})
+    assert kinds == {3: ("overtaking", "starboard")} and shaping.offset_m > 0.0
+    kinds, _ = _overtake([wide], sight_m=50.0, overtaking={3: "starboard"}, keep_side_m=0.0)
+    assert kinds == {3: ("following", "")}

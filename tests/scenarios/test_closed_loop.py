@@ -135,3 +135,18 @@ def test_the_canal_width_is_logged_and_summarised(tmp_path):
     assert s["narrow_below_m"] == 10.0 and s["time_narrow_s"] == 0.0
     assert s["min_clearance_where_wide_m"] == s["min_clearance_m"]
     assert s["mean_centre_offset_narrow_m"] is None
+
+
+def test_the_goal_is_reached_past_its_finish_line_only_on_the_last_leg():
+    """As ArduPilot counts a waypoint passed: within the goal radius, or past the line square
+    to the last leg through the goal (a boat kept 7 m to one side by another vessel); never
+    where an earlier leg of a route that doubles back lies behind that line."""
+    from scenarios.loop.closed_loop import _finish_direction, _past_finish
+
+    finish = _finish_direction(WAYPOINTS)
+    assert _past_finish(np.array([200.5, 9.0]), WAYPOINTS, finish)
+    assert not _past_finish(np.array([199.0, 9.0]), WAYPOINTS, finish)
+    back = np.array([[0.0, 0.0], [100.0, 0.0], [100.0, 40.0], [50.0, 40.0]])
+    turn = _finish_direction(back)
+    assert _past_finish(np.array([45.0, 38.0]), back, turn)
+    assert not _past_finish(np.array([20.0, 1.0]), back, turn)  # on the first leg
