@@ -213,7 +213,8 @@ def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed
         # on its port side the boat is in the lane of whatever comes the other way: only
         # where there is room for that vessel too, or none can come unseen (or the boat is
         # beside it already, where going on is the shorter way out of that lane); a side
-        # chosen is kept while its room stays within keep_side_m of what choosing it asks
+        # chosen is kept while its room stays within keep_side_m of what choosing it asks;
+        # never to the side a vessel given way to is crossing to (Rule 15: pass astern of it)
         give = keep_side_m if before == "port" else 0.0
         port_ok = (port_gap >= need - give and -1.0 not in heading_to
                    and (port_gap >= three_abreast - give or seen_clear or alongside))
