@@ -23,6 +23,8 @@ from scenarios.studies.overrides import toml_value
 
 KINDS = ("meeting", "overtaken", "followed", "crossing", "drifting")
 SPEED_MPS = 2.0  # the own boat's target speed (the scenario default)
+BARGE_HALF_BEAM_M = 3.0  # the widest followed barge's (30 m long, beam a fifth of that)
+VESSEL_GAP_M = 1.0  # scripted vessels keep this far apart, and from the quays
 
 
 @dataclass(frozen=True)
@@ -82,12 +84,23 @@ def _draw(rng, seed: int, index: int, perception: str) -> Case:
         obstacles = canal.moored_boats(rng)
         if place == "open":
             place = "moored boat"
-    vessels, names, duration = [], [], 0.0
+    # scripted vessels do not avoid each other: one met or overtaken keeps beside a barge
+    # followed in mid-channel by construction (and the two on their own sides of the centre
+    # line), or is left out where the canal has no room
+    beside = BARGE_HALF_BEAM_M + VESSEL_GAP_M if "followed" in kinds else (
+        0.5 * VESSEL_GAP_M if {"meeting", "overtaken"} <= set(kinds) else 0.0)
+    vessels, names, duration, kept = [], [], 0.0, []
     for k, kind in enumerate(kinds):
-        text, end_s = _vessel(kind, k, canal, rng, place)
+        drawn = _vessel(kind, k, canal, rng, place, beside)
+        if drawn is None:
+            continue
+        text, end_s = drawn
         vessels.append(text)
         names.append(f"{kind}-{k}")
+        kept.append(kind)
         duration = max(duration, end_s)
+    kinds = kept
+    lines[0] = f"# canalnav fuzz case {index} of seed {seed}: {', '.join(kinds)} at the {place}"
     duration = max(duration, (canal.route_length + 20.0) / SPEED_MPS * 1.6 + 30.0)
     lines += [f"duration_s = {math.ceil(duration)}", f"seed = {index}", ""]
     lines += body + obstacles
@@ -185,9 +198,12 @@ class _Canal:
         return out
 
 
-def _vessel(kind: str, k: int, canal: _Canal, rng, place: str) -> tuple[str, float]:
+def _vessel(kind: str, k: int, canal: _Canal, rng, place: str,
+            beside_m: float = 0.0) -> tuple[str, float] | None:
     """A vessel's [[vessel]] table, timed to meet the own boat at the first leg's end (the
-    bend, the mouth, the moored boats), and when its run ends."""
+    bend, the mouth, the moored boats), and when its run ends. `beside_m` > 0: a barge is
+    followed in mid-channel, and a vessel met or overtaken keeps its side this far (plus its
+    half beam) off the centre line, or is not drawn (None) where the canal leaves no room."""
     s_meet = canal.leg + float(rng.uniform(-15.0, 10.0))
     t_meet = s_meet / SPEED_MPS + 5.0  # the own boat's arrival (it starts from rest)
     w = canal.width
@@ -195,17 +211,26 @@ def _vessel(kind: str, k: int, canal: _Canal, rng, place: str) -> tuple[str, flo
     if kind == "meeting":  # the other way, on its own starboard side (our port)
         v = float(rng.uniform(1.0, 2.5))
         off = -float(rng.uniform(0.1, 0.3)) * w
+        hull, beam = _hull(rng, 6.0, 14.0)
+        off = _clear_of_barge(off, beam, w, beside_m)
+        if off is None:
+            return None
         s0 = min(s_meet + v * t_meet, canal.length - 5.0)
         pts = [canal.at(s0, off), *canal.turn(off)[::-1], canal.at(5.0, off)]
         if s0 <= canal.leg + 1.0:
             pts = [canal.at(s0, off), canal.at(5.0, off)]
-        return _route(name, _hull(rng, 6.0, 14.0), pts, v, max(0.0, t_meet - (s0 - s_meet) / v)), \
+        return _route(name, hull, pts, v, max(0.0, t_meet - (s0 - s_meet) / v)), \
             t_meet + 120.0
     if kind in ("overtaken", "followed"):  # the same way, slower, reached at the place
         v = float(rng.uniform(0.6, 1.2)) if kind == "overtaken" else float(rng.uniform(0.5, 0.9))
         off = float(rng.uniform(0.1, 0.25)) * w if kind == "overtaken" else 0.0
         s0 = max(s_meet - v * t_meet, 30.0)
-        hull = _hull(rng, 6.0, 12.0) if kind == "overtaken" else _hull(rng, 20.0, 30.0, barge=True)
+        hull, beam = _hull(rng, 6.0, 12.0) if kind == "overtaken" else _hull(rng, 20.0, 30.0,
+                                                                             barge=True)
+        if kind == "overtaken":
+            off = _clear_of_barge(off, beam, w, beside_m)
+            if off is None:
+                return None
         pts = [canal.at(s0, off), *canal.turn(off),
                canal.at(canal.length + 60.0, off)]  # on past the canal's end: the goal clears
         if s0 >= canal.leg - 1.0:
@@ -218,7 +243,7 @@ def _vessel(kind: str, k: int, canal: _Canal, rng, place: str) -> tuple[str, flo
         y0, y1 = 55.0 * canal.side, -0.25 * canal.width * canal.side
         path = abs(y0)
         pts = [[x, y0], [x, y1], [x + 0.5 * canal.width, y1], [canal.length + 60.0, y1]]
-        return _route(name, _hull(rng, 5.0, 10.0), pts, v, max(0.0, t_meet - path / v)), \
+        return _route(name, _hull(rng, 5.0, 10.0)[0], pts, v, max(0.0, t_meet - path / v)), \
             t_meet + 90.0
     # drifting: a kayak wandering near the place, from a quay
     y = canal.side * (w / 2 - 2.0)  # (the moored boats are on the other side)
@@ -235,12 +260,24 @@ def _vessel(kind: str, k: int, canal: _Canal, rng, place: str) -> tuple[str, flo
     return "\n".join(lines), t_meet + 90.0
 
 
-def _hull(rng, lo: float, hi: float, barge: bool = False) -> list[str]:
+def _hull(rng, lo: float, hi: float, barge: bool = False) -> tuple[list[str], float]:
+    """A hull's [vessel.hull] lines and its beam."""
     length = float(rng.uniform(lo, hi))
-    beam = length / (5.0 if barge else 3.2)
+    beam = round(length / (5.0 if barge else 3.2), 1)
     return ["[vessel.hull]", f"length_m = {length:.1f}", f"beam_m = {beam:.1f}",
             f"height_m = {1.8 if barge else 1.4}",
-            f"shape = {toml_value('rectangle' if barge else 'pointed')}"]
+            f"shape = {toml_value('rectangle' if barge else 'pointed')}"], beam
+
+
+def _clear_of_barge(off: float, beam: float, width: float, beside_m: float) -> float | None:
+    """The offset `off` (its sign kept) moved out to `beside_m` plus half the `beam` from the
+    centre line, and no nearer the quay than VESSEL_GAP_M; None where both do not fit."""
+    if beside_m <= 0.0:
+        return off
+    least, most = beside_m + 0.5 * beam, 0.5 * width - 0.5 * beam - VESSEL_GAP_M
+    if least > most:
+        return None
+    return math.copysign(min(max(abs(off), least), most), off)
 
 
 def _route(name: str, hull: list[str], pts, speed: float, start_s: float) -> str:
