@@ -7,6 +7,7 @@ moored boats along a quay and piers now and then; a current of up to 0.5 m/s; on
 vessels, each met, overtaken, followed, crossing (from the side canal, from either side) or
 drifting (a kayak). Every vessel is timed to reach its encounter when the own boat does, at
 the place where it is hardest: in the bend, at the side canal's mouth, beside a moored boat.
+Scripted vessels give way to nobody, so they are kept apart by construction (`_clear_of_barge`).
 The judgement comes from the true poses in each run's summary: no exception, collision or
 controller failure, at least `min_hull_m` hull to hull from every vessel; the goal, fallback
 steps, tracks on walls and what the rules of the road asked are reported beside.
