@@ -111,7 +111,7 @@ def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed
     def here() -> tuple[float, float]:
         if not room_here:
             xy0, heading0 = path.at(progress_m)
-            room_here.append(_room(xy0, heading0, 0.0, segs))
+            room_here.append(_beside(xy0, heading0, 0.0, 0.0, segs))
         return room_here[0]
 
     overtakes = []  # (track, s, d, half_len, half_wid, along, port_gap, stbd_gap)
@@ -187,8 +187,7 @@ def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed
             stbd_gap = edge + stbd_gap if math.isfinite(stbd_gap) else (
                 here()[1] - (d + half_wid))
             overtakes.append((tr, s, d, half_len, half_wid, along, port_gap, stbd_gap,
-                              len(encounters), port_gap - (d - half_wid),
-                              stbd_gap + (d + half_wid)))
+                              len(encounters)))
         encounters.append(Encounter(tr.id, kind, ahead))
     # Overtake only with room beside the vessel, nobody coming the other way in the lane the
     # boat takes, and the channel straight until the boat is past (Rule 9(f): round a bend a
@@ -199,7 +198,7 @@ def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed
     three_abreast = 2 * Rb + 2 * dv + oncoming_room_m  # the boat and one coming the other way
     room_between = 2.0 * (bow_m + follow_gap_m)  # to pull in between two vessels
     ahead_of = None  # (its stern's arc length, the side it is passed on or None) so far
-    for tr, s, d, half_len, half_wid, along, port_gap, stbd_gap, k, port, stbd in sorted(
+    for tr, s, d, half_len, half_wid, along, port_gap, stbd_gap, k in sorted(
             overtakes, key=lambda o: -o[1]):
         side, why = None, "no room to overtake"
         past = (s - progress_m) + half_len + bow_m + follow_gap_m  # to be clear ahead of it
@@ -246,7 +245,9 @@ def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed
             why += (" clear of a vessel crossing" if heading_to else
                     " with the way ahead seen too short" if port_gap >= need else "")
         ahead_of = (s - half_len, side)
-        if side is not None:
+        if side is not None:  # beside it, and R_b + d_p off the wall (from the path: port,
+            # stbd), whichever is nearer the path
+            port, stbd = port_gap - (d - half_wid), stbd_gap + (d + half_wid)
             target = (max(d - half_wid - dv - Rb, -(port - Rb - dp)) if side == "port" else
                       min(d + half_wid + dv + Rb, stbd - Rb - dp))
             pass_offsets.append((s - progress_m, target))
@@ -287,20 +288,10 @@ def lane_room(path: WaypointPath, s_boat: float, s_vessel: float, edge_m: float,
     return float(np.min(stbd - edge_m))
 
 
-def _room(xy, heading, offset_m, segs) -> tuple[float, float]:
-    """Distance from the path point (moved `offset_m` across) to the walls abeam, port and
-    starboard (inf: none seen)."""
-    pts = np.asarray(xy, float).reshape(-1, 2)
-    h = np.asarray(heading, float).reshape(-1)
-    if offset_m:
-        pts = pts + offset_m * np.column_stack([-np.sin(h), np.cos(h)])
-    port, stbd = walls_abeam(pts, h, segs)
-    return float(port[0]), float(stbd[0])
-
-
 def _beside(xy, heading, port_edge_m, stbd_edge_m, segs) -> tuple[float, float]:
-    """Distance to the wall abeam to port of the path point moved `port_edge_m` across, and
-    to starboard of it moved `stbd_edge_m` across (inf: none seen)."""
+    """Distance to the wall abeam to port of the path point moved `port_edge_m` across (+ to
+    starboard), and to starboard of it moved `stbd_edge_m` across (inf: none seen); both 0:
+    the channel abeam of the path point itself."""
     pts = np.asarray(xy, float).reshape(1, 2)
     h = float(np.asarray(heading, float).reshape(-1)[0])
     normal = np.array([-math.sin(h), math.cos(h)])

@@ -135,7 +135,8 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
     # the goal is reached within goal_radius_m of it or past its finish line (square to the
     # last leg through it), as ArduPilot's waypoint navigation counts a waypoint passed: a
     # boat kept off the line by another vessel passes it abeam and would otherwise go on
-    finish = _finish_direction(cfg.waypoints)
+    route = np.asarray(cfg.waypoints, float).reshape(-1, 2)
+    finish = _finish_direction(route)
     n_imu = max(1, int(round(cfg.control_period_s / cfg.imu_period_s)))
     gps_every = max(1, int(round(1.0 / (cfg.gps.rate_hz * cfg.imu_period_s))))
     n_steps = int(math.floor(cfg.duration_s / cfg.control_period_s + 1e-9))
@@ -297,7 +298,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
                 status = f"plant failed: {exc}"
                 break
             if (np.hypot(*(out.state[:2] - goal)) <= cfg.goal_radius_m
-                    or _past_finish(out.state[:2], cfg.waypoints, finish)):
+                    or _past_finish(out.state[:2], route, finish)):
                 status, reached = "reached goal", True
                 break
             if progress is not None:
@@ -450,10 +451,10 @@ def terminal_events(redraw: bool, stream=sys.stderr) -> Callable[[float, str], N
     return say
 
 
-def _past_finish(position, waypoints, finish) -> bool:
-    """The boat is past the finish line and on the last leg (nearer it than any other: a
-    route that doubles back does not end where an earlier leg passes behind the goal)."""
-    pts = np.asarray(waypoints, float).reshape(-1, 2)
+def _past_finish(position, pts: np.ndarray, finish) -> bool:
+    """The boat is past the finish line of the route `pts` (K, 2) and on its last leg
+    (nearer it than any other: a route that doubles back does not end where an earlier leg
+    passes behind the goal)."""
     if float(np.dot(position - pts[-1], finish)) <= 0.0:
         return False
     if len(pts) < 3:

@@ -7,7 +7,7 @@ moored boats along a quay and piers now and then; a current of up to 0.5 m/s; on
 vessels, each met, overtaken, followed, crossing (from the side canal, from either side) or
 drifting (a kayak). Every vessel is timed to reach its encounter when the own boat does, at
 the place where it is hardest: in the bend, at the side canal's mouth, beside a moored boat.
-Scripted vessels give way to nobody, so they are kept apart by construction (`_clear_of_barge`).
+Scripted vessels give way to nobody, so they are kept apart by construction (`_kept_apart`).
 The judgement comes from the true poses in each run's summary: no exception, collision or
 controller failure, at least `min_hull_m` hull to hull from every vessel; the goal, fallback
 steps, tracks on walls and what the rules of the road asked are reported beside.
@@ -78,8 +78,7 @@ def _draw(rng, seed: int, index: int, perception: str) -> Case:
         perception = str(rng.choice(["lidar", "known-walls"]))
     canal = _Canal(width, leg, length, bend_deg, junction, side)
     place = "junction" if junction else ("bend" if abs(bend_deg) >= 10 else "open")
-    lines = [f"# canalnav fuzz case {index} of seed {seed}: {', '.join(kinds)} at the {place}",
-             "[scenario]", f"name = {toml_value(f'fuzz-{seed}-{index:04d}')}"]
+    lines = ["[scenario]", f"name = {toml_value(f'fuzz-{seed}-{index:04d}')}"]
     body, obstacles = canal.toml(), []
     if moored:
         obstacles = canal.moored_boats(rng)
@@ -101,7 +100,8 @@ def _draw(rng, seed: int, index: int, perception: str) -> Case:
         kept.append(kind)
         duration = max(duration, end_s)
     kinds = kept
-    lines[0] = f"# canalnav fuzz case {index} of seed {seed}: {', '.join(kinds)} at the {place}"
+    lines.insert(0, f"# canalnav fuzz case {index} of seed {seed}: {', '.join(kinds)} at the "
+                    f"{place}")
     duration = max(duration, (canal.route_length + 20.0) / SPEED_MPS * 1.6 + 30.0)
     lines += [f"duration_s = {math.ceil(duration)}", f"seed = {index}", ""]
     lines += body + obstacles
@@ -213,7 +213,7 @@ def _vessel(kind: str, k: int, canal: _Canal, rng, place: str,
         v = float(rng.uniform(1.0, 2.5))
         off = -float(rng.uniform(0.1, 0.3)) * w
         hull, beam = _hull(rng, 6.0, 14.0)
-        off = _clear_of_barge(off, beam, w, beside_m)
+        off = _kept_apart(off, beam, w, beside_m)
         if off is None:
             return None
         s0 = min(s_meet + v * t_meet, canal.length - 5.0)
@@ -229,7 +229,7 @@ def _vessel(kind: str, k: int, canal: _Canal, rng, place: str,
         hull, beam = _hull(rng, 6.0, 12.0) if kind == "overtaken" else _hull(rng, 20.0, 30.0,
                                                                              barge=True)
         if kind == "overtaken":
-            off = _clear_of_barge(off, beam, w, beside_m)
+            off = _kept_apart(off, beam, w, beside_m)
             if off is None:
                 return None
         pts = [canal.at(s0, off), *canal.turn(off),
@@ -270,9 +270,10 @@ def _hull(rng, lo: float, hi: float, barge: bool = False) -> tuple[list[str], fl
             f"shape = {toml_value('rectangle' if barge else 'pointed')}"], beam
 
 
-def _clear_of_barge(off: float, beam: float, width: float, beside_m: float) -> float | None:
+def _kept_apart(off: float, beam: float, width: float, beside_m: float) -> float | None:
     """The offset `off` (its sign kept) moved out to `beside_m` plus half the `beam` from the
-    centre line, and no nearer the quay than VESSEL_GAP_M; None where both do not fit."""
+    centre line (clear of a barge there, or of a vessel on the other side), and no nearer the
+    quay than VESSEL_GAP_M; None where both do not fit."""
     if beside_m <= 0.0:
         return off
     least, most = beside_m + 0.5 * beam, 0.5 * width - 0.5 * beam - VESSEL_GAP_M
