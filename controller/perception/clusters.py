@@ -29,11 +29,12 @@ from functools import cached_property, partial
 
 import numpy as np
 
-from . import opencv
+from . import opencv, polar_view
 from ..kernels import pointer
 from .cloud_crop import occupancy_kernel
 from .cluster_cells import cluster_kernel, cluster_members_compiled, sociable_points_compiled
 from .wall_chains import chain_kernel, chained_walls_compiled
+from .polar_view import bearing_bin
 from .wall_cells import fraction_on
 
 # `cfg` below is a `tracking.TrackerConfig` (it holds the thresholds); not imported, so that
@@ -78,25 +79,15 @@ class Clusters:
     def nearest(self) -> np.ndarray:
         """(V, bins) squared range of the nearest occluder per bearing bin seen from each
         viewpoint (inf: none); made when `free_space` first asks (most scans never do)."""
-        return np.stack([_polar_ranges(self.occluders - v[:2]) if v[:2].any()
-                         else _polar_ranges(self.occluders) for v in self.viewpoints])
+        return polar_view.nearest(self.occluders, self.viewpoints)
 
     @cached_property
-    def hull_slope(self) -> np.ndarray:
-        """(V, bins) the steepest rise (height over range) of the own hull's returns per
-        bearing bin seen from each viewpoint (-inf: none): a sight line from the unit that
-        climbs less than this is cut by the hull (a cabin), one that climbs more passes over
-        (a deck below the unit)."""
-        out = np.full((len(self.viewpoints), _N_BINS), -np.inf)
-        h = self.hull_returns
-        for k, (vx, vy, vz) in enumerate(self.viewpoints.tolist()):
-            if len(h) and math.isfinite(vz):
-                dx, dy = h[:, 0] - vx, h[:, 1] - vy
-                r = np.hypot(dx, dy)
-                near = r > 1e-3
-                np.maximum.at(out[k], _bearing_bin(dx[near], dy[near]),
-                              (h[near, 2] - vz) / r[near])
-        return out
+    def hull_view(self) -> polar_view.HullView:
+        """The own hull's returns as each viewpoint sees them: `slope(k, bins)`, the steepest
+        rise (height over range) per bearing bin (-inf: none): a sight line from the unit
+        that climbs less than this is cut by the hull (a cabin), one that climbs more passes
+        over (a deck below the unit)."""
+        return polar_view.HullView(self.hull_returns, self.viewpoints)
 
 
 def wall_segments(segments: np.ndarray, cfg: "TrackerConfig", known=None) -> np.ndarray:
@@ -613,26 +604,6 @@ def grid_at_numpy(grid: np.ndarray, xy: np.ndarray, r: float, cell: float) -> np
     return grid[i, j].astype(bool)
 
 
-_N_BINS = 1440  # polar image: bins of a quarter degree (the beams: ~0.35 deg apart)
-
-
-def _bearing_bin(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Bearing bins of body-frame points (float32 arctan: a third of the float64 time)."""
-    a = np.arctan2(np.asarray(y, np.float32), np.asarray(x, np.float32))
-    a *= np.float32(_N_BINS / (2 * math.pi))
-    a += np.float32(_N_BINS / 2)
-    return np.minimum(a.astype(np.intp), _N_BINS - 1)
-
-
-def _polar_ranges(xy: np.ndarray) -> np.ndarray:
-    """(bins,) the squared range of the nearest return per bearing bin (inf: none)."""
-    img = np.full(_N_BINS, np.inf)
-    if len(xy):
-        x, y = xy[:, 0], xy[:, 1]
-        np.minimum.at(img, _bearing_bin(x, y), (x * x + y * y).astype(float))
-    return img
-
-
 def free_space(found: Clusters, points, margin_m: float) -> np.ndarray:
     """(K,) bool: the scan saw through each inertial point (K, 2): from one of its
     viewpoints, the nearest return at its bearing lies more than `margin_m` beyond it, or
@@ -651,10 +622,11 @@ def free_space(found: Clusters, points, margin_m: float) -> np.ndarray:
     for k, (vx, vy, vz) in enumerate(found.viewpoints.tolist()):
         ux, uy = bx - vx, by - vy
         dist = np.hypot(ux, uy)
-        bins = _bearing_bin(ux, uy)
+        bins = bearing_bin(ux, uy)
         seen = nearest[k, bins] > (dist + margin_m) ** 2
         if math.isfinite(vz) and len(found.hull_returns):  # the sight line to the band's top
-            seen &= found.hull_slope[k, bins] < (found.band_top_m - vz) / np.maximum(dist, 1e-3)
+            seen &= found.hull_view.slope(k, bins) < (found.band_top_m - vz) / np.maximum(
+                dist, 1e-3)
         free |= seen  # (as from the origin, no return at a bearing counts as open water)
     return free
 

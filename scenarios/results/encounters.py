@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from controller.geometry import distance_to_polylines, point_segment_distance, segments_cross
+from controller.geometry import distance_to_polylines, nearest_leg_distance, segments_cross
 
 from .metrics import HULL_BREADTH_M, HULL_LENGTH_M
 
@@ -27,10 +27,19 @@ def polygon_distance(p: np.ndarray, q: np.ndarray) -> float:
     one lies inside the other (a collision)."""
     pa, pb = p, np.roll(p, -1, axis=0)
     qa, qb = q, np.roll(q, -1, axis=0)
-    if segments_cross(pa, pb, qa, qb).any() or _inside(p[0], q) or _inside(q[0], p):
+    if _circles_meet(p, q) and (segments_cross(pa, pb, qa, qb).any() or _inside(p[0], q)
+                                or _inside(q[0], p)):
         return 0.0
-    return float(min(point_segment_distance(p, qa, qb).min(),
-                     point_segment_distance(q, pa, pb).min()))
+    return float(min(nearest_leg_distance(p, qa, qb).min(),
+                     nearest_leg_distance(q, pa, pb).min()))
+
+
+def _circles_meet(p: np.ndarray, q: np.ndarray) -> bool:
+    """Whether the circles about the two outlines' first points through their farthest
+    points meet: where they do not, the outlines can neither cross nor hold one another."""
+    rp = float(np.sqrt(((p - p[0]) ** 2).sum(axis=1).max()))
+    rq = float(np.sqrt(((q - q[0]) ** 2).sum(axis=1).max()))
+    return math.hypot(*(p[0] - q[0])) <= (rp + rq) * (1.0 + 1e-9) + 1e-9
 
 
 def _inside(point, ring) -> bool:

@@ -10,6 +10,7 @@ LiDAR simulator renders them and the metrics measure clearance against them.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -147,6 +148,20 @@ class Obstacle:
             raise WorldError(what, "outline", f"crosses itself (legs {crossing[0]} and {crossing[1]})")
         if abs(polygon_area(self.outline)) < 1e-6:
             raise WorldError(what, "outline", "encloses no area (its points lie on one line)")
+
+    def moved(self, outline: np.ndarray) -> "Obstacle":
+        """This obstacle with its outline moved rigidly to `outline` (the same polygon turned
+        and shifted, e.g. a vessel's hull at its pose now): a rigid move cannot make an
+        outline cross itself or lose its area, so the checks are not run again (a vessel's
+        prism is placed every control step)."""
+        pts = np.array(outline, float).reshape(-1, 2)
+        if pts.shape != self.outline.shape:
+            raise ValueError(f"obstacle {self.name!r}: a moved outline has {len(pts)} points, "
+                             f"not {len(self.outline)}")
+        pts.setflags(write=False)
+        out = copy.copy(self)
+        object.__setattr__(out, "outline", pts)
+        return out
 
     def present_at(self, time_s: float) -> bool:
         """Whether the obstacle is in the water at simulation time `time_s`."""

@@ -61,6 +61,9 @@ class Vessel:
     poses: np.ndarray  # (T, 3)
     velocities: np.ndarray  # (T, 2)
     motion: str = "route"  # "route" | "course", for messages
+    # the pose, outline and prism last asked for, by time: the loop, the LiDAR, the metrics
+    # and the log all ask for the same instant several times a step
+    _last: dict = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
     def on_route(cls, name: str, hull: Hull, waypoints, speed_mps: float, duration_s: float,
@@ -117,6 +120,16 @@ class Vessel:
     # -- queries ------------------------------------------------------------------------
     def pose_at(self, time_s: float) -> np.ndarray:
         """(x, y, psi) at `time_s` (held at the ends of the track)."""
+        return self._remembered("pose", time_s, self._pose_at).copy()
+
+    def _remembered(self, what: str, time_s: float, make):
+        """`make(time_s)`, made once for the time last asked for."""
+        hit = self._last.get(what)
+        if hit is None or hit[0] != time_s:
+            hit = self._last[what] = (time_s, make(time_s))
+        return hit[1]
+
+    def _pose_at(self, time_s: float) -> np.ndarray:
         t = self.times
         i = int(np.clip(np.searchsorted(t, time_s) - 1, 0, len(t) - 2)) if len(t) > 1 else 0
         if len(t) == 1:
@@ -134,12 +147,19 @@ class Vessel:
 
     def outline_at(self, time_s: float) -> np.ndarray:
         """(K, 2) hull outline in the NED frame at `time_s`."""
-        return place(self.hull.local_outline(), self.pose_at(time_s))
+        return self._remembered("outline", time_s, lambda t: place(
+            self.hull.local_outline(), self._remembered("pose", t, self._pose_at))).copy()
 
     def obstacle_at(self, time_s: float) -> Obstacle:
-        """The hull at `time_s` as a prism for the LiDAR simulator."""
-        return Obstacle(self.outline_at(time_s), z_top_m=self.hull.height_m, kind="boat",
-                        name=self.name)
+        """The hull at `time_s` as a prism for the LiDAR simulator (the hull's prism, checked
+        once, moved to the pose)."""
+        prism = self._last.get("prism")
+        if prism is None:
+            prism = self._last["prism"] = Obstacle(self.hull.local_outline(),
+                                                   z_top_m=self.hull.height_m, kind="boat",
+                                                   name=self.name)
+        return self._remembered("obstacle", time_s,
+                                lambda t: prism.moved(self.outline_at(t)))
 
 
 def place(local: np.ndarray, pose) -> np.ndarray:
