@@ -1,6 +1,16 @@
 """Shared test settings: every test runs offline and seeded."""
 
+import os
+
 import pytest
+
+from scenarios.sensors.perception_pipeline import WORKER_ENV
+
+# Under pytest-xdist every core already runs a test: a LiDAR run's perception worker would
+# only add processes (a third more CPU for the same runs); the tests of the worker itself
+# ask for it by name.
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    os.environ.setdefault(WORKER_ENV, "0")
 
 # A short canal with one 30 m radius bend, known walls, d_p = 2 m: long enough to see each
 # controller steer, short enough for the default tests (compare, MAVLink end to end).

@@ -384,7 +384,8 @@ _profile_kernel = Kernel(Path(__file__).with_name("lidar_profile.c"), {
     "lidar_keep": (_i64, [_i64, _ptr, _ptr, _ptr, ctypes.c_int, ctypes.c_int, ctypes.c_int8,
                           _ptr, _ptr]),
     "lidar_points": (None, [_i64, _ptr, _ptr, _ptr, _ptr, ctypes.c_float, _ptr, _ptr, _i64,
-                            _i64, _ptr, _ptr, _ptr, ctypes.c_int8, _ptr, _i64])})
+                            _i64, _ptr, _ptr, _ptr, ctypes.c_int8, _ptr, _i64]),
+    "lidar_hull": (None, [_i64, _ptr, _ptr, _ptr, _i64, _ptr, ctypes.c_float, _ptr, _i64])})
 """The renderer's compiled passes (call it: the library, or None to render with numpy)."""
 
 
@@ -534,6 +535,7 @@ class LidarSimulator:
             ("bin_height", self._bin_height), ("bin_first", self._bin_first64),
             ("tan_el", b.tan_el), ("inv_drop", b.inv_drop), ("min_h", b.min_h),
             ("max_h", b.max_h), ("cos_el", b.cos_el), ("vec", b.vec),
+            ("hull_points", b.hull_points), ("hull_unit", b.hull_unit),
             ("beam_start", self._beam_start64), ("origins", self._origins32),
             ("face_label", _FACE_LABEL), ("top_label", _TOP_LABEL))}
 
@@ -1026,10 +1028,11 @@ class LidarSimulator:
                          at["cos_el"], at["vec"], len(t_all), len(self.sensors),
                          at["beam_start"], at["origins"], p(ripple), WATER, p(out),
                          out.shape[1])
-        hull = out[:, n:n + m]
-        beams.hull_points.take(hull_keep, axis=1, out=hull)
-        hull += beams.hull_unit.take(hull_keep, axis=1) * (
-            self._normal(m) * f32(noise.range_sigma_m))
+        hull_keep = np.ascontiguousarray(hull_keep, np.int64)
+        normal = np.ascontiguousarray(self._normal(m), f32)
+        lib.lidar_hull(m, p(hull_keep), at["hull_points"], at["hull_unit"],
+                       beams.hull_points.shape[1], p(normal), f32(noise.range_sigma_m),
+                       p(out) + 4 * n, out.shape[1])
         if not labelled:
             return out, None, None
         return (out,

@@ -395,3 +395,17 @@ void lidar_points(int64_t n, const int64_t *idx, const int8_t *lab, const float 
         out[2 * stride + j] = z;
     }
 }
+
+/* Fourth part: the own hull's kept returns (indices keep, m of them) of the nh noiseless
+ * ones (pts, rows x, y, z of stride nh), moved along their beams (unit, the same layout) by
+ * range noise normal * sigma, into the 3 rows of out (stride `stride`). */
+void lidar_hull(int64_t m, const int64_t *keep, const float *pts, const float *unit,
+                int64_t nh, const float *normal, float sigma, float *out, int64_t stride)
+{
+    for (int64_t j = 0; j < m; j++) {
+        int64_t i = keep[j];
+        float s = normal[j] * sigma;
+        for (int c = 0; c < 3; c++)
+            out[c * stride + j] = pts[c * nh + i] + unit[c * nh + i] * s;
+    }
+}

@@ -34,16 +34,29 @@ class PerceptionWorkerError(RuntimeError):
     """The perception worker process died or could not be started."""
 
 
+WORKER_ENV = "CANALNAV_PERCEPTION_WORKER"
+
+
+def spare_core() -> bool:
+    """Whether a run's perception may have a worker process by default: when the machine has
+    a second core, unless $CANALNAV_PERCEPTION_WORKER is 0 (several runs side by side already
+    keep every core busy, as the tests under pytest-xdist do: a worker per run then only adds
+    processes, and the machine does about a third more work for the same runs)."""
+    if os.environ.get(WORKER_ENV, "").strip() == "0":
+        return False
+    return (os.cpu_count() or 1) > 1
+
+
 class DelayedLidarPerception:
     """`LidarPerception` with a one-period latency; `parallel` runs it in a worker process
-    (default: when the machine has more than one core). `cloud_points` > 0: `last_cloud` is
+    (default: `spare_core()`). `cloud_points` > 0: `last_cloud` is
     the decimated cloud of the scan whose result the last call returned (see LidarPerception)."""
 
     name = "lidar"
 
     def __init__(self, world, seed: int = 0, config=None, detection=None,
                  parallel: bool | None = None, tracking=None, cloud_points: int = 0):
-        self.parallel = (os.cpu_count() or 1) > 1 if parallel is None else bool(parallel)
+        self.parallel = spare_core() if parallel is None else bool(parallel)
         self.points_per_scan: list[int] = []
         self.time_s = {"lidar_scan": 0.0, "detection": 0.0, "tracking": 0.0,
                        "lidar_scan_cpu": 0.0, "detection_cpu": 0.0, "tracking_cpu": 0.0}

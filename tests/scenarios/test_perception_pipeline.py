@@ -165,3 +165,17 @@ def test_going_astern_the_wall_behind_is_detected_not_cropped_as_wake():
 
     assert astern_segments(2.0) == 0  # ahead: cropped with the wake
     assert astern_segments(-0.5) >= 1  # astern: seen
+
+
+def test_a_run_gets_a_perception_worker_by_default_only_with_a_core_to_spare(monkeypatch):
+    from scenarios.sensors import perception_pipeline as pp
+
+    monkeypatch.setattr(pp.os, "cpu_count", lambda: 4)
+    monkeypatch.delenv(pp.WORKER_ENV, raising=False)
+    assert pp.spare_core()
+    monkeypatch.setenv(pp.WORKER_ENV, "0")  # several runs side by side
+    assert not pp.spare_core()
+    monkeypatch.setenv(pp.WORKER_ENV, "1")
+    assert pp.spare_core()
+    monkeypatch.setattr(pp.os, "cpu_count", lambda: 1)
+    assert not pp.spare_core()
