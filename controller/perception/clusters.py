@@ -76,10 +76,11 @@ class Clusters:
         return len(self.count)
 
     @cached_property
-    def nearest(self) -> np.ndarray:
-        """(V, bins) squared range of the nearest occluder per bearing bin seen from each
-        viewpoint (inf: none); made when `free_space` first asks (most scans never do)."""
-        return polar_view.nearest(self.occluders, self.viewpoints)
+    def occluder_view(self) -> polar_view.OccluderView:
+        """The occluders as each viewpoint sees them: `nearest(k, bins)`, the squared range
+        of the nearest per bearing bin (inf: none); made when `free_space` first asks (most
+        scans never do)."""
+        return polar_view.OccluderView(self.occluders, self.viewpoints)
 
     @cached_property
     def hull_view(self) -> polar_view.HullView:
@@ -617,13 +618,12 @@ def free_space(found: Clusters, points, margin_m: float) -> np.ndarray:
     c, s = math.cos(psi), math.sin(psi)
     d = np.asarray(points, float).reshape(-1, 2) - (x0, y0)
     bx, by = c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]
-    nearest = found.nearest
     free = np.zeros(len(bx), bool)
     for k, (vx, vy, vz) in enumerate(found.viewpoints.tolist()):
         ux, uy = bx - vx, by - vy
         dist = np.hypot(ux, uy)
         bins = bearing_bin(ux, uy)
-        seen = nearest[k, bins] > (dist + margin_m) ** 2
+        seen = found.occluder_view.nearest(k, bins) > (dist + margin_m) ** 2
         if math.isfinite(vz) and len(found.hull_returns):  # the sight line to the band's top
             seen &= found.hull_view.slope(k, bins) < (found.band_top_m - vz) / np.maximum(
                 dist, 1e-3)

@@ -1,41 +1,29 @@
-/* The polar images `clusters.free_space` reads, per viewpoint (a LiDAR on the boat): the
- * squared range of the nearest return in each bearing bin, and the steepest rise of the own
- * hull's returns. Two passes around numpy's float32 arctan2 (so the bins are numpy's, bit for
- * bit, whichever SIMD arctan2 this machine's numpy uses):
- *   polar_offsets_*: each point's offset from each viewpoint as float32 (the arctan2's input)
- *                    and the value kept per bin (squared range, or rise over range);
- *   polar_scatter:   bin of each arctan2 and the least (or, negated, the greatest) value per
- *                    bin, as np.minimum.at / np.maximum.at do (a NaN stays).
+/* What `clusters.free_space` reads of a scan, per viewpoint (a LiDAR on the boat): the
+ * squared range of the nearest return in a bearing bin, and the steepest rise of the own
+ * hull's returns there, for the few bins it asks about. Around numpy's float32 arctan2, so the
+ * bins are numpy's bit for bit (whichever SIMD arctan2 this machine's numpy uses):
+ *   polar_offsets_*, polar_hull_offsets: each point's offset from each viewpoint as float32
+ *                    (the arctan2's input);
+ *   polar_bins:      the bin of each arctan2;
+ *   polar_nearest_at_*, polar_hull_slope_at: the least squared range, the greatest rise, of
+ *                    the points in each bin asked, as np.minimum.at / np.maximum.at over all
+ *                    of them would leave it (a NaN stays).
  * The numpy twins are `polar_view.nearest_numpy` and `polar_view.hull_slope_numpy`. */
 #include <math.h>
 #include <stdint.h>
 
-/* Returns (N, 2) of type T with strides rs, cs (in elements) seen from V viewpoints (vx, vy):
- * fx, fy (V * N) the float32 offsets; r2 (V * N) the squared range. A viewpoint at the origin
- * (flag at_origin[v]) takes the points as they are, its squared range in T's precision (numpy
- * squares the cloud's own dtype there); elsewhere the offsets and squares are double. */
+/* Points (N, 2) of type T with strides rs, cs (in elements) seen from V viewpoints (vx, vy):
+ * fx, fy (V * N) their float32 offsets (numpy: the offset in double, then to float32; from
+ * the origin that is the point itself). */
 #define OFFSETS(NAME, T)                                                                      \
     void NAME(int64_t n, const T *p, int64_t rs, int64_t cs, int64_t nv, const double *vx,   \
-              const double *vy, const uint8_t *at_origin, float *fx, float *fy, double *r2) \
+              const double *vy, float *fx, float *fy)                                        \
     {                                                                                         \
-        for (int64_t v = 0; v < nv; v++) {                                                    \
-            float *ox = fx + v * n, *oy = fy + v * n;                                         \
-            double *orr = r2 + v * n;                                                         \
+        for (int64_t v = 0; v < nv; v++)                                                      \
             for (int64_t i = 0; i < n; i++) {                                                 \
-                T x = p[i * rs], y = p[i * rs + cs];                                          \
-                if (at_origin[v]) {                                                           \
-                    T s = x * x + y * y;                                                      \
-                    ox[i] = (float)x;                                                         \
-                    oy[i] = (float)y;                                                         \
-                    orr[i] = (double)s;                                                       \
-                } else {                                                                      \
-                    double dx = (double)x - vx[v], dy = (double)y - vy[v];                    \
-                    ox[i] = (float)dx;                                                        \
-                    oy[i] = (float)dy;                                                        \
-                    orr[i] = dx * dx + dy * dy;                                               \
-                }                                                                             \
+                fx[v * n + i] = (float)((double)p[i * rs] - vx[v]);                           \
+                fy[v * n + i] = (float)((double)p[i * rs + cs] - vy[v]);                      \
             }                                                                                 \
-        }                                                                                     \
     }
 
 OFFSETS(polar_offsets_f32, float)
@@ -103,33 +91,44 @@ void polar_hull_slope_at(int64_t n, const double *h, const int16_t *hbin, double
             out[j] = out[slot[asked[j]]];
 }
 
-/* Bins of V rows of N float32 bearings (numpy's arctan2, radians), as
- * min(int(a * (bins / 2 pi) + bins / 2), bins - 1) in float32 (`bin_of`), and per bin the
- * least value of each row: img (V, bins) holds the start values on entry. */
-void polar_scatter(int64_t nv, int64_t n, const float *angle, const double *value,
-                   int64_t bins, float scale, float half, double *img)
-{
-    /* A scan's returns come in bearing order, so most follow one in the same bin: the
-     * least is kept in a register along a run and stored when the bin changes. */
-    for (int64_t v = 0; v < nv; v++) {
-        double *row = img + v * bins, best = 0.0;
-        int64_t cur = -1;
-        for (int64_t i = 0; i < n; i++) {
-            int64_t k = v * n + i;
-            if (isnan(angle[k]))
-                continue; /* (no bearing: an unclean point; numpy would refuse it) */
-            int64_t b = bin_of(angle[k], scale, half, bins);
-            if (b != cur) {
-                if (cur >= 0)
-                    row[cur] = best;
-                cur = b;
-                best = row[b];
-            }
-            double x = value[k];
-            if (!isnan(best) && !(best <= x))
-                best = x;
-        }
-        if (cur >= 0)
-            row[cur] = best;
+/* The least squared range of the returns (as polar_offsets_* measure it, from one viewpoint)
+ * in each of q asked bins (inf: none), given every return's bin (pbin, -1: none). */
+#define NEAREST_AT(NAME, T)                                                                   \
+    void NAME(int64_t n, const T *p, int64_t rs, int64_t cs, const int16_t *pbin, double vx,  \
+              double vy, int at_origin, int64_t q, const int64_t *asked, int64_t bins,        \
+              double *out)                                                                    \
+    {                                                                                         \
+        int32_t slot[4096];                                                                   \
+        if (bins > 4096)                                                                      \
+            return;                                                                           \
+        for (int64_t b = 0; b < bins; b++)                                                    \
+            slot[b] = -1;                                                                     \
+        for (int64_t j = 0; j < q; j++) {                                                     \
+            out[j] = INFINITY;                                                                \
+            if (asked[j] >= 0 && asked[j] < bins && slot[asked[j]] < 0)                       \
+                slot[asked[j]] = (int32_t)j;                                                  \
+        }                                                                                     \
+        for (int64_t i = 0; i < n; i++) {                                                     \
+            int16_t b = pbin[i];                                                              \
+            if (b < 0 || slot[b] < 0)                                                         \
+                continue;                                                                     \
+            T x = p[i * rs], y = p[i * rs + cs];                                              \
+            double r2;                                                                        \
+            if (at_origin) {                                                                  \
+                T s = x * x + y * y;                                                          \
+                r2 = (double)s;                                                               \
+            } else {                                                                          \
+                double dx = (double)x - vx, dy = (double)y - vy;                              \
+                r2 = dx * dx + dy * dy;                                                       \
+            }                                                                                 \
+            double *best = out + slot[b];                                                     \
+            if (!isnan(*best) && !(*best <= r2))                                              \
+                *best = r2;                                                                   \
+        }                                                                                     \
+        for (int64_t j = 0; j < q; j++)                                                       \
+            if (asked[j] >= 0 && asked[j] < bins)                                             \
+                out[j] = out[slot[asked[j]]];                                                 \
     }
-}
+
+NEAREST_AT(polar_nearest_at_f32, float)
+NEAREST_AT(polar_nearest_at_f64, double)

@@ -23,14 +23,16 @@ N_BINS = 1440  # bins of a quarter degree (the beams: ~0.35 deg apart)
 _SCALE, _HALF = np.float32(N_BINS / (2 * math.pi)), np.float32(N_BINS / 2)
 
 _i64, _ptr, _f64, _f32 = ctypes.c_int64, ctypes.c_void_p, ctypes.c_double, ctypes.c_float
-_OFFSETS = (None, [_i64, _ptr, _i64, _i64, _i64, *[_ptr] * 6])
+_OFFSETS = (None, [_i64, _ptr, _i64, _i64, _i64, *[_ptr] * 4])
+_NEAREST_AT = (None, [_i64, _ptr, _i64, _i64, _ptr, _f64, _f64, ctypes.c_int, _i64, _ptr, _i64,
+                      _ptr])
 polar_kernel = Kernel(Path(__file__).with_name("polar_view.c"), {
     "polar_offsets_f32": _OFFSETS, "polar_offsets_f64": _OFFSETS,
-    "polar_scatter": (None, [_i64, _i64, _ptr, _ptr, _i64, _f32, _f32, _ptr]),
     "polar_hull_offsets": (None, [_i64, _ptr, _i64, *[_ptr] * 4]),
     "polar_bins": (None, [_i64, _ptr, _f32, _f32, _i64, _ptr]),
     "polar_hull_slope_at": (None, [_i64, _ptr, _ptr, _f64, _f64, _f64, _i64, _ptr, _i64,
-                                   _ptr])})
+                                   _ptr]),
+    "polar_nearest_at_f32": _NEAREST_AT, "polar_nearest_at_f64": _NEAREST_AT})
 """The compiled passes (call it: the library, or None for the numpy twins)."""
 
 _SCRATCH: dict = {}
@@ -53,28 +55,56 @@ def bearing_bin(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.minimum(a.astype(np.intp), N_BINS - 1)
 
 
-def nearest(occluders: np.ndarray, viewpoints: np.ndarray) -> np.ndarray:
-    """(V, bins) squared range of the nearest of the (N, 2) body-frame returns per bearing
-    bin seen from each viewpoint (V, 2+) (inf: none)."""
-    lib = polar_kernel()
-    p = np.asarray(occluders)
-    if lib is None or p.dtype not in (np.float32, np.float64) or p.ndim != 2 or not len(p):
-        return nearest_numpy(p, viewpoints)
-    v = np.asarray(viewpoints, float)[:, :2]
-    nv, n = len(v), len(p)
-    vx, vy = np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1])
-    at_origin = (~v.any(axis=1)).astype(np.uint8)
-    fx, fy = _scratch("fx", nv * n, np.float32), _scratch("fy", nv * n, np.float32)
-    r2, angle = _scratch("value", nv * n, np.float64), _scratch("angle", nv * n, np.float32)
-    size = p.itemsize
-    offsets = lib.polar_offsets_f32 if p.dtype == np.float32 else lib.polar_offsets_f64
-    offsets(n, p.__array_interface__["data"][0], p.strides[0] // size, p.strides[1] // size,
-            nv, pointer(vx), pointer(vy), pointer(at_origin), pointer(fx), pointer(fy),
-            pointer(r2))
-    np.arctan2(fy, fx, out=angle)
-    img = np.full((nv, N_BINS), np.inf)
-    lib.polar_scatter(nv, n, pointer(angle), pointer(r2), N_BINS, _SCALE, _HALF, pointer(img))
-    return img
+class OccluderView:
+    """The returns that can hide something (N, 2: body-frame x, y) as each viewpoint (V, 2+)
+    sees them: `nearest(k, bins)` is the squared range of the nearest in each bin seen from
+    viewpoint k (inf: none), as `nearest_numpy(...)[k, bins]`. The bins of every return are
+    found once; ranges only for the returns in the bins asked."""
+
+    def __init__(self, occluders: np.ndarray, viewpoints: np.ndarray):
+        self.occluders = np.asarray(occluders)
+        self.viewpoints = np.asarray(viewpoints, float)
+        p = self.occluders
+        self._lib = polar_kernel()
+        if self._lib is None or p.dtype not in (np.float32, np.float64) or p.ndim != 2:
+            self._lib = None
+            self._image = nearest_numpy(p, self.viewpoints)
+        self._bins = None  # (V, N) int16, made when first asked
+
+    def nearest(self, k: int, bins: np.ndarray) -> np.ndarray:
+        bins = np.ascontiguousarray(bins, np.int64)
+        if self._lib is None:
+            return self._image[k, bins]
+        out = np.full(len(bins), np.inf)
+        p, n = self.occluders, len(self.occluders)
+        if not n or not len(bins):
+            return out
+        if self._bins is None:
+            self._bins = self._occluder_bins()
+        vx, vy = self.viewpoints[k, :2].tolist()
+        size = p.itemsize
+        at = self._lib.polar_nearest_at_f32 if p.dtype == np.float32 \
+            else self._lib.polar_nearest_at_f64
+        at(n, p.__array_interface__["data"][0], p.strides[0] // size, p.strides[1] // size,
+           pointer(self._bins[k]), vx, vy, int(vx == 0.0 and vy == 0.0), len(bins),
+           pointer(bins), N_BINS, pointer(out))
+        return out
+
+    def _occluder_bins(self) -> np.ndarray:
+        lib, p = self._lib, self.occluders
+        v = self.viewpoints[:, :2]
+        nv, n = len(v), len(p)
+        vx, vy = np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1])
+        fx, fy = _scratch("fx", nv * n, np.float32), _scratch("fy", nv * n, np.float32)
+        angle = _scratch("angle", nv * n, np.float32)
+        size = p.itemsize
+        offsets = lib.polar_offsets_f32 if p.dtype == np.float32 else lib.polar_offsets_f64
+        offsets(n, p.__array_interface__["data"][0], p.strides[0] // size,
+                p.strides[1] // size, nv, pointer(vx), pointer(vy), pointer(fx), pointer(fy))
+        np.arctan2(fy, fx, out=angle)
+        out = np.empty((nv, n), np.int16)
+        lib.polar_bins(nv * n, pointer(angle), _SCALE, _HALF, N_BINS, pointer(out))
+        return out
 
 
 class HullView:

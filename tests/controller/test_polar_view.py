@@ -4,8 +4,8 @@ own arctan2 gives the bins, the kernels the offsets and the least or greatest va
 import numpy as np
 import pytest
 
-from controller.perception.polar_view import (N_BINS, HullView, hull_slope_numpy, nearest,
-                                              nearest_numpy, polar_kernel)
+from controller.perception.polar_view import (N_BINS, HullView, OccluderView,
+                                              hull_slope_numpy, nearest_numpy, polar_kernel)
 
 pytestmark = pytest.mark.skipif(polar_kernel() is None, reason="no C compiler")
 
@@ -19,17 +19,21 @@ def _viewpoints(rng):
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 @pytest.mark.parametrize("seed", range(8))
-def test_nearest_is_its_numpy_twin(seed, dtype):
+def test_nearest_returns_asked_are_the_numpy_image(seed, dtype):
     rng = np.random.default_rng(700 + seed)
     cloud = rng.uniform(-60, 60, (int(rng.integers(1, 5000)), 3)).astype(dtype)
     cloud[:5, :2] = 0.0  # returns on a viewpoint's axis and at the origin
     occluders = cloud[:, :2]  # a strided view, as the tracker's crop hands it over
     view = _viewpoints(rng)
     view[1, :2] = occluders[1]
-    got = nearest(occluders, view)
-    assert got.shape == (len(view), N_BINS)
-    np.testing.assert_array_equal(got, nearest_numpy(occluders, view))
-    assert np.isinf(got).any() and np.isfinite(got).any()
+    image = nearest_numpy(occluders, view)
+    seen = OccluderView(occluders, view)
+    asked = rng.integers(0, N_BINS, 40)
+    asked[1] = asked[0]  # a bin asked twice
+    for k in range(len(view)):
+        np.testing.assert_array_equal(seen.nearest(k, asked), image[k, asked])
+        np.testing.assert_array_equal(seen.nearest(k, np.arange(N_BINS)), image[k])
+    assert np.isinf(image).any() and np.isfinite(image).any()
 
 
 @pytest.mark.parametrize("seed", range(8))
@@ -52,5 +56,6 @@ def test_hull_slopes_asked_are_the_numpy_image(seed):
 
 def test_empty_inputs_see_nothing():
     view = np.array([[0.0, 0.0, np.nan], [1.0, 0.5, 2.0]])
-    assert np.all(nearest(np.zeros((0, 2), np.float32), view) == np.inf)
+    assert np.all(OccluderView(np.zeros((0, 2), np.float32), view).nearest(0, np.arange(5))
+                  == np.inf)
     assert np.all(HullView(np.zeros((0, 3)), view).slope(1, np.arange(5)) == -np.inf)
