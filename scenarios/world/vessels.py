@@ -63,7 +63,7 @@ class Vessel:
     motion: str = "route"  # "route" | "course", for messages
     # the pose, outline and prism last asked for, by time: the loop, the LiDAR, the metrics
     # and the log all ask for the same instant several times a step
-    _last: dict = field(default_factory=dict, repr=False, compare=False)
+    _last: dict = field(default_factory=dict, repr=False, compare=False, init=False)
 
     @classmethod
     def on_route(cls, name: str, hull: Hull, waypoints, speed_mps: float, duration_s: float,

@@ -127,3 +127,21 @@ def test_a_vessel_needs_one_motion():
 def test_two_vessels_may_not_start_in_one_place():
     second = BASE[BASE.index("[[vessel]]"):].replace('name = "tour boat"', 'name = "twin"')
     bad(BASE + second, "field 'vessel[1].route.waypoints'", "starts inside 'tour boat'")
+
+
+def test_a_vessels_prism_is_its_hull_placed_and_the_same_as_one_checked_anew():
+    from scenarios.world.canal import Obstacle
+
+    v = Vessel.on_route("launch", Hull(8.0, 2.5, 1.4), [[0.0, 0.0], [40.0, 30.0]], 1.5, 60.0)
+    for t in (0.0, 7.3, 7.3, 30.0):
+        prism = v.obstacle_at(t)
+        fresh = Obstacle(v.outline_at(t), z_top_m=1.4, kind="boat", name="launch")
+        np.testing.assert_array_equal(prism.outline, fresh.outline)
+        assert (prism.z_top_m, prism.kind, prism.name) == (1.4, "boat", "launch")
+        assert not prism.outline.flags.writeable
+    assert v.obstacle_at(7.3) is v.obstacle_at(7.3)  # made once for the instant
+    pose = v.pose_at(7.3)
+    pose[0] += 100.0  # a caller's copy: the vessel is not moved
+    assert v.pose_at(7.3)[0] != pose[0]
+    with pytest.raises(ValueError):
+        v.obstacle_at(0.0).moved(np.zeros((3, 2)))
