@@ -601,14 +601,15 @@ class NmpcController:
         if rules.stop_at_m is not None:
             stop_at = rules.stop_at_m if stop_at is None else min(stop_at, rules.stop_at_m)
         ref_speed = speed if rules.speed_mps is None else min(speed, rules.speed_mps)
-        ref_speed, blind = self._blind_speed(float(s[0]), x[:2], segs, ref_speed,
-                                             float(x[3]))
+        ref_speed, blind, slow_to = self._blind_speed(float(s[0]), x[:2], segs, ref_speed,
+                                                      float(x[3]))
         if blind:
             rules = replace(rules, reason=f"{rules.reason}; {blind}" if rules.reason else blind)
         offset = self._line(rules.offset_m)
         reference = reference_trajectory(self._path, x[:2], x[2], ref_speed, c.horizon,
                                          c.step_s, self._progress_m, self.search_ahead_m,
-                                         stop_at, c.stop_decel_mps2, inputs.current, offset)
+                                         stop_at, c.stop_decel_mps2, inputs.current, offset,
+                                         slow_to)
         planned = reference.states[:, :2] if guess is None else guess[self._xy_at]
         selection = select_checked(segs, x[:2], c.segment_slots, c.segment_range_m, planned)
         slots = self._keep_slots(selection.slots)
@@ -672,19 +673,21 @@ class NmpcController:
     def _blind_speed(self, s: float, xy: np.ndarray, segments, speed: float,
                      surge_mps: float):
         """The reference speed capped for the first blind opening ahead (`blind_openings`)
-        for a boat going at `surge_mps`, and what to say of it ("" when nothing is capped)."""
+        for a boat going at `surge_mps`, what to say of it ("" when nothing is capped), and
+        where the reference must be down to the blind speed ((arc length, speed), or None)."""
         c = self.config
         if not c.blind_speed_mps or speed <= c.blind_speed_mps:  # 0 or None: no rule
-            return speed, ""
+            return speed, "", None
         at = blind_opening_ahead(self._path, s, xy, segments, c.segment_range_m,
                                  c.blind_depth_m)
         if at is None:
-            return speed, ""
+            return speed, "", None
         cap = blind_speed_cap(at - c.blind_margin_m - s, c.blind_speed_mps, c.stop_decel_mps2)
-        if cap >= speed:
-            return speed, ""
+        slow_to = (at - c.blind_margin_m, c.blind_speed_mps)
+        if cap >= speed:  # not braking yet: the reference brakes where the horizon reaches
+            return speed, "", slow_to
         cap = ask_below_cap(cap, surge_mps)
-        return cap, f"blind opening {at - s:.0f} m ahead: {cap:.1f} m/s"
+        return cap, f"blind opening {at - s:.0f} m ahead: {cap:.1f} m/s", slow_to
 
     def _stop(self, s: float, d: float, x: np.ndarray, segments, elapsed_s: float,
               blind: bool):

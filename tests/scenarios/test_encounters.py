@@ -142,3 +142,16 @@ def test_a_boat_overtaken_close_beside_a_barge_keeps_its_track(tmp_path):
     assert summary["tracking"]["id_switches"]["overtaken-1"] <= 4, summary["tracking"]
     failed = check_criteria(scenario, summary)
     assert not failed, "; ".join(failed)
+
+
+def test_a_vessel_crossing_out_of_a_blind_side_canal_is_given_way_to_in_time(tmp_path):
+    """Fuzz seed 1 case 146 (LiDAR): a vessel comes out of a side canal on the starboard
+    side and crosses ahead. The reference held the blind-opening speed cap of where the boat
+    was over the whole horizon and the boat lagged it, came to the opening at 1.4 m/s and
+    passed 0.59 m from the vessel; braking along the horizon it gives way and keeps 2 m."""
+    scenario = load_scenario(REGRESSIONS / "vessel_crossing_out_of_a_blind_side_canal.toml")
+    summary = run_scenario(scenario, tmp_path, plots=False).summary
+    hull = summary["vessels"][0]["min_hull_distance_m"]
+    assert hull >= 2.0, hull
+    failed = check_criteria(scenario, summary)
+    assert not failed, "; ".join(failed)
