@@ -307,6 +307,7 @@ class NmpcController:
         self._solved = False  # a plan came from a successful solve since the reset
         self.last_qp_inputs: tuple | None = None
         self._progress_m: float | None = None  # None: not yet located on the path
+        self._place_m: float | None = None  # the boat's own, which may go back (`_setup`)
         self._path: WaypointPath | None = None
         self._waypoints_given: np.ndarray | None = None
         self.consecutive_failures = 0
@@ -586,8 +587,19 @@ class NmpcController:
         if self._progress_m is None:  # a new path: where the boat is along all of it (a
             # forward search from 0 put a boat that starts 60 m along at 50 m, 10 m off)
             self._progress_m = self._path.project(x[:2])[0]
-        s, d = self._path.frame(x[None, :2], self._progress_m,
-                                self._progress_m + self.search_ahead_m)  # the boat on the path
+        # The boat's place for the way ahead and the rules: searched forward from the last
+        # progress, and back by as far as the boat went astern since, so that a boat backing
+        # away from a blocked way is found where it is (held at the progress, its offset was
+        # its distance from there, 30 m "across" the canal, and the way looked open through
+        # the bank: fuzz seed 1 case 102). The reference keeps to the progress, forward only
+        # (going back with a boat backing away from a vessel met, it let it go on astern)
+        if self._place_m is None:
+            self._place_m = self._progress_m
+        astern = max(-float(x[3]), 0.0) * elapsed
+        start = max(self._place_m - (1.5 * astern + 0.1 if astern > 0.0 else 0.0), 0.0)
+        s, d = self._path.frame(x[None, :2], start,
+                                start + self.search_ahead_m)  # the boat on the path
+        self._place_m = float(s[0])
         resting = at_rest(vessels)
         if resting:  # vessels at rest: walls grown by rest_keep_m, not slots or rules
             vessels = tuple(v for v in vessels if v not in resting)
@@ -609,7 +621,9 @@ class NmpcController:
         reference = reference_trajectory(self._path, x[:2], x[2], ref_speed, c.horizon,
                                          c.step_s, self._progress_m, self.search_ahead_m,
                                          stop_at, c.stop_decel_mps2, inputs.current, offset,
-                                         slow_to)
+                                         slow_to, back_to_stop=stop is not None
+                                         and stop.blocked_at_m is not None
+                                         and stop_at == stop.at_m)
         planned = reference.states[:, :2] if guess is None else guess[self._xy_at]
         selection = select_checked(segs, x[:2], c.segment_slots, c.segment_range_m, planned)
         slots = self._keep_slots(selection.slots)
@@ -634,11 +648,11 @@ class NmpcController:
     def _memory(self) -> tuple:
         """What `_setup` moves on, to be put back when a prepared setup goes unused."""
         return (self._way.memory(), self._rules_stop, self._rules_clear_s, self._slots_prev,
-                self._giving_way, self._overtaking)
+                self._giving_way, self._overtaking, self._place_m)
 
     def _restore(self, memory: tuple) -> None:
         (way, self._rules_stop, self._rules_clear_s, self._slots_prev,
-         self._giving_way, self._overtaking) = memory
+         self._giving_way, self._overtaking, self._place_m) = memory
         self._way.restore(way)
 
     def _rules(self, s: float, d: float, vessels, segments, speed_mps: float,
@@ -713,7 +727,7 @@ class NmpcController:
             return
         self._path = waypoint_path(waypoints)
         self._waypoints_given = given
-        self._progress_m = None  # located at the next step
+        self._progress_m = self._place_m = None  # located at the next step
 
     def _solve(self, w, p, w_ref, lbw, ubw) -> SqpResult:
         if self.method == "ipopt":

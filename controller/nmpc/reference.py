@@ -185,13 +185,18 @@ def reference_trajectory(path: WaypointPath, position, heading_rad: float, speed
                          horizon: int, step_s: float, progress_m: float = 0.0,
                          search_ahead_m: float | None = None, stop_at_m: float | None = None,
                          decel_mps2: float = 0.15, current=(0.0, 0.0),
-                         offset_m: float = 0.0, slow_to=None) -> Reference:
+                         offset_m: float = 0.0, slow_to=None,
+                         back_to_stop: bool = False) -> Reference:
     """r_0..r_horizon for a boat at `position` with `heading_rad`.
 
     The closest point is searched on arc lengths [progress_m, progress_m + search_ahead_m]
     (the whole rest of the path if None): forward only, so the reference never runs back.
     With `stop_at_m` (an arc length: a blocked way ahead) the reference slows at `decel_mps2`
-    so that it comes to rest there, and holds there; one already past it holds where it is.
+    so that it comes to rest there, and holds there; one already past it holds where it is,
+    or with `back_to_stop` is at the stop (behind the boat) all along: a boat waiting for a
+    blocked way that drifts past its stop is brought back, not held wherever it drifts to
+    (held where it was, a boat waiting in a bend crept 2 m past its stop, to the inner bank
+    and into it: fuzz seed 1 case 102).
     With a `current` (north, east, m/s) the reference heading is the one that keeps the
     course on the path: the leg's direction turned into the current by the crab angle
     asin(V_across / u_water), as a helmsman holds a boat on a line across a stream; without
@@ -211,7 +216,9 @@ def reference_trajectory(path: WaypointPath, position, heading_rad: float, speed
     s_max = None if search_ahead_m is None else progress_m + search_ahead_m
     s0, distance = path.project(position, s_min=progress_m, s_max=s_max)
     t = step_s * np.arange(horizon + 1)
-    if slow_to is not None:
+    if back_to_stop and stop_at_m is not None and s0 > stop_at_m:
+        s, speed = np.full(horizon + 1, max(stop_at_m, 0.0)), np.zeros(horizon + 1)
+    elif slow_to is not None:
         s, speed = _braking(s0, speed_mps, stop_at_m, slow_to, decel_mps2, t)
     elif stop_at_m is None:
         s = s0 + speed_mps * t

@@ -105,3 +105,15 @@ def test_a_slow_down_ahead_brakes_the_reference_along_the_horizon():
                                    decel_mps2=0.1, slow_to=(40.0, 1.0))
     assert stopped.states[-1, 0] == pytest.approx(30.0, abs=0.3)
     assert stopped.states[-1, 3] == pytest.approx(0.0, abs=0.2)
+
+
+def test_a_boat_past_a_blocked_way_stop_is_brought_back_to_it():
+    """A boat that drifted past its stop holds where it is, or, waiting for a blocked way
+    (`back_to_stop`), is asked back to the stop: it keeps its distance from the obstruction."""
+    path = waypoint_path([[0.0, 0.0], [200.0, 0.0]])
+    held = reference_trajectory(path, [42.0, 0.0], 0.0, 2.0, NP, TS, stop_at_m=40.0)
+    assert np.allclose(held.states[:, 0], 42.0)
+    back = reference_trajectory(path, [42.0, 0.0], 0.0, 2.0, NP, TS, stop_at_m=40.0,
+                                back_to_stop=True)
+    assert np.allclose(back.states[:, 0], 40.0) and np.all(back.states[:, 3] == 0.0)
+    assert back.progress_m == pytest.approx(42.0)

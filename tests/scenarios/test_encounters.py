@@ -3,6 +3,7 @@ tests: each scenario file under tests/scenarios/encounters/ runs with its own pe
 (known walls: the vessel handed over at once, with its velocity) and with the LiDAR, and must
 end with no controller failure and no collision, its criteria met."""
 
+import csv
 from dataclasses import replace
 from pathlib import Path
 
@@ -155,3 +156,24 @@ def test_a_vessel_crossing_out_of_a_blind_side_canal_is_given_way_to_in_time(tmp
     assert hull >= 2.0, hull
     failed = check_criteria(scenario, summary)
     assert not failed, "; ".join(failed)
+
+
+def test_a_kayak_stopped_across_a_bend_is_waited_for_without_going_on(tmp_path):
+    """Fuzz seed 1 case 102 (known walls): a kayak stopped across the canal just past a
+    bend leaves no way by; the sweep found one through the inner bank, and a boat backing
+    off was read 30 m across the canal, so the boat stopped and went on four times, and
+    once crept into the bank. It waits now from well before the bend, never goes on, and
+    keeps 2 m from the kayak (260 s of the case: its kayak never moves on)."""
+    scenario = replace(load_scenario(REGRESSIONS / "kayak_stopped_across_a_bend.toml"),
+                       duration_s=260.0)
+    result = run_scenario(scenario, tmp_path, plots=False)
+    summary = result.summary
+    assert not summary["collision"], summary["status"]
+    failed = check_criteria(scenario, summary)
+    assert not failed, "; ".join(failed)
+    with open(tmp_path / "log.csv") as f:
+        rows = [(float(r["time_s"]), r["status"]) for r in csv.DictReader(f)]
+    waiting = [t for t, status in rows if status.startswith("waiting")]
+    assert waiting and waiting[0] < 150.0, waiting[:1]
+    going = [t for t, status in rows if t > waiting[0] and status == "success"]
+    assert not going, going[:3]
