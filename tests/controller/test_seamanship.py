@@ -58,6 +58,15 @@ def test_a_vessel_crossing_from_starboard_is_given_way_to():
     assert shaping.stop_at_m is not None and shaping.stop_at_m < 30.0
 
 
+def test_a_vessel_given_way_to_is_stopped_short_of_by_half_its_length():
+    """A vessel crossing out of a side canal turns into the channel where it crosses, and its
+    stern swings half its length toward the boat: the stop is R_b + d_v + the bow short of
+    that, not of its beam (seed 1 case 3: 1.6 m from a stern turning in front of the bow)."""
+    kind, shaping = _kind(Track(4, (30.0, 15.0), (0.0, -1.5), length_m=9.0, width_m=2.4))
+    assert kind == "give_way"
+    assert shaping.stop_at_m == pytest.approx(30.0 - (2.0 + 2.0 + 2.0 + 4.5), abs=0.5)
+
+
 def test_a_vessel_crossing_from_port_is_stood_on_for():
     kind, shaping = _kind(Track(4, (30.0, -15.0), (0.0, 1.5)))
     assert kind == "stand_on"
