@@ -617,7 +617,12 @@ class NmpcController:
                                                       float(x[3]))
         if blind:
             rules = replace(rules, reason=f"{rules.reason}; {blind}" if rules.reason else blind)
-        offset = self._line(rules.offset_m)
+        # waiting for a blocked way, the boat keeps to the rules' line: the gap the sweep
+        # leads to is shut (led to it, a boat waiting at a side canal's mouth was steered
+        # about the mouth, its thrust for the rudder driving it on to 1 m of a kayak
+        # stopped across the canal: fuzz seed 1 case 3)
+        offset = (rules.offset_m if stop is not None and stop.blocked_at_m is not None
+                  else self._line(rules.offset_m))
         reference = reference_trajectory(self._path, x[:2], x[2], ref_speed, c.horizon,
                                          c.step_s, self._progress_m, self.search_ahead_m,
                                          stop_at, c.stop_decel_mps2, inputs.current, offset,

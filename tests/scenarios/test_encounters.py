@@ -177,3 +177,16 @@ def test_a_kayak_stopped_across_a_bend_is_waited_for_without_going_on(tmp_path):
     assert waiting and waiting[0] < 150.0, waiting[:1]
     going = [t for t, status in rows if t > waiting[0] and status == "success"]
     assert not going, going[:3]
+
+
+def test_a_boat_waiting_for_a_kayak_stopped_across_keeps_off_it(tmp_path):
+    """Fuzz seed 1 case 3 (LiDAR): a kayak stopped across a narrow canal past a side canal's
+    mouth blocks the way; the waiting boat, led about the mouth by the sweep's line into the
+    gap beside the kayak, came to 0.98 m of it. Waiting on the rules' line it keeps 2 m."""
+    scenario = replace(load_scenario(
+        REGRESSIONS / "kayak_stopped_across_a_canal_past_a_side_canal.toml"), duration_s=200.0)
+    summary = run_scenario(scenario, tmp_path, plots=False).summary
+    assert not summary["collision"], summary["status"]
+    kayak = next(v for v in summary["vessels"] if v["name"] == "drifting-0")
+    assert kayak["min_hull_distance_m"] >= 2.0, kayak
+    assert summary["time_waiting_s"] > 60.0, summary["time_waiting_s"]
