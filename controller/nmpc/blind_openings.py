@@ -10,7 +10,9 @@ where the ray runs `depth_m` without meeting a segment (a side canal, a basin's 
 is *blind* when the line from the boat to the ray's far end crosses a segment (the corner's
 wall is in the way). The reference speed is capped so that the boat comes to the first blind
 opening at `speed_mps`: v <= sqrt(speed^2 + 2 a (s_open - margin - s)); a boat over the cap
-is asked for as much less again, since the NMPC follows a slower reference with a lag.
+is asked for as much less again, since the NMPC follows a slower reference with a lag, and
+the reference brakes along the horizon down to `speed_mps` at the opening less the margin
+(`reference_trajectory`'s `slow_to`), as the boat must.
 
 Why it does not slow the boat for nothing: an opening must have a bank running away from the
 channel beside it (the side canal's wall), which a stretch of quay the scan missed has not;

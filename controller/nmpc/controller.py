@@ -307,6 +307,7 @@ class NmpcController:
         self._solved = False  # a plan came from a successful solve since the reset
         self.last_qp_inputs: tuple | None = None
         self._progress_m: float | None = None  # None: not yet located on the path
+        self._place_m: float | None = None  # the boat's own, which may go back (`_setup`)
         self._path: WaypointPath | None = None
         self._waypoints_given: np.ndarray | None = None
         self.consecutive_failures = 0
@@ -586,8 +587,19 @@ class NmpcController:
         if self._progress_m is None:  # a new path: where the boat is along all of it (a
             # forward search from 0 put a boat that starts 60 m along at 50 m, 10 m off)
             self._progress_m = self._path.project(x[:2])[0]
-        s, d = self._path.frame(x[None, :2], self._progress_m,
-                                self._progress_m + self.search_ahead_m)  # the boat on the path
+        # The boat's place for the way ahead and the rules: searched forward from the last
+        # progress, and back by as far as the boat went astern since, so that a boat backing
+        # away from a blocked way is found where it is (held at the progress, its offset was
+        # its distance from there, 30 m "across" the canal, and the way looked open through
+        # the bank: fuzz seed 1 case 102). The reference keeps to the progress, forward only
+        # (going back with a boat backing away from a vessel met, it let it go on astern)
+        if self._place_m is None:
+            self._place_m = self._progress_m
+        astern = max(-float(x[3]), 0.0) * elapsed
+        start = max(self._place_m - (1.5 * astern + 0.1 if astern > 0.0 else 0.0), 0.0)
+        s, d = self._path.frame(x[None, :2], start,
+                                start + self.search_ahead_m)  # the boat on the path
+        self._place_m = float(s[0])
         resting = at_rest(vessels)
         if resting:  # vessels at rest: walls grown by rest_keep_m, not slots or rules
             vessels = tuple(v for v in vessels if v not in resting)
@@ -601,14 +613,22 @@ class NmpcController:
         if rules.stop_at_m is not None:
             stop_at = rules.stop_at_m if stop_at is None else min(stop_at, rules.stop_at_m)
         ref_speed = speed if rules.speed_mps is None else min(speed, rules.speed_mps)
-        ref_speed, blind = self._blind_speed(float(s[0]), x[:2], segs, ref_speed,
-                                             float(x[3]))
+        ref_speed, blind, slow_to = self._blind_speed(float(s[0]), x[:2], segs, ref_speed,
+                                                      float(x[3]))
         if blind:
             rules = replace(rules, reason=f"{rules.reason}; {blind}" if rules.reason else blind)
-        offset = self._line(rules.offset_m)
+        # waiting for a blocked way, the boat keeps to the rules' line: the gap the sweep
+        # leads to is shut (led to it, a boat waiting at a side canal's mouth was steered
+        # about the mouth, its thrust for the rudder driving it on to 1 m of a kayak
+        # stopped across the canal: fuzz seed 1 case 3)
+        offset = (rules.offset_m if stop is not None and stop.blocked_at_m is not None
+                  else self._line(rules.offset_m))
         reference = reference_trajectory(self._path, x[:2], x[2], ref_speed, c.horizon,
                                          c.step_s, self._progress_m, self.search_ahead_m,
-                                         stop_at, c.stop_decel_mps2, inputs.current, offset)
+                                         stop_at, c.stop_decel_mps2, inputs.current, offset,
+                                         slow_to, back_to_stop=stop is not None
+                                         and stop.blocked_at_m is not None
+                                         and stop_at == stop.at_m)
         planned = reference.states[:, :2] if guess is None else guess[self._xy_at]
         selection = select_checked(segs, x[:2], c.segment_slots, c.segment_range_m, planned)
         slots = self._keep_slots(selection.slots)
@@ -633,11 +653,11 @@ class NmpcController:
     def _memory(self) -> tuple:
         """What `_setup` moves on, to be put back when a prepared setup goes unused."""
         return (self._way.memory(), self._rules_stop, self._rules_clear_s, self._slots_prev,
-                self._giving_way, self._overtaking)
+                self._giving_way, self._overtaking, self._place_m)
 
     def _restore(self, memory: tuple) -> None:
         (way, self._rules_stop, self._rules_clear_s, self._slots_prev,
-         self._giving_way, self._overtaking) = memory
+         self._giving_way, self._overtaking, self._place_m) = memory
         self._way.restore(way)
 
     def _rules(self, s: float, d: float, vessels, segments, speed_mps: float,
@@ -672,19 +692,21 @@ class NmpcController:
     def _blind_speed(self, s: float, xy: np.ndarray, segments, speed: float,
                      surge_mps: float):
         """The reference speed capped for the first blind opening ahead (`blind_openings`)
-        for a boat going at `surge_mps`, and what to say of it ("" when nothing is capped)."""
+        for a boat going at `surge_mps`, what to say of it ("" when nothing is capped), and
+        where the reference must be down to the blind speed ((arc length, speed), or None)."""
         c = self.config
         if not c.blind_speed_mps or speed <= c.blind_speed_mps:  # 0 or None: no rule
-            return speed, ""
+            return speed, "", None
         at = blind_opening_ahead(self._path, s, xy, segments, c.segment_range_m,
                                  c.blind_depth_m)
         if at is None:
-            return speed, ""
+            return speed, "", None
         cap = blind_speed_cap(at - c.blind_margin_m - s, c.blind_speed_mps, c.stop_decel_mps2)
-        if cap >= speed:
-            return speed, ""
+        slow_to = (at - c.blind_margin_m, c.blind_speed_mps)
+        if cap >= speed:  # not braking yet: the reference brakes where the horizon reaches
+            return speed, "", slow_to
         cap = ask_below_cap(cap, surge_mps)
-        return cap, f"blind opening {at - s:.0f} m ahead: {cap:.1f} m/s"
+        return cap, f"blind opening {at - s:.0f} m ahead: {cap:.1f} m/s", slow_to
 
     def _stop(self, s: float, d: float, x: np.ndarray, segments, elapsed_s: float,
               blind: bool):
@@ -710,7 +732,7 @@ class NmpcController:
             return
         self._path = waypoint_path(waypoints)
         self._waypoints_given = given
-        self._progress_m = None  # located at the next step
+        self._progress_m = self._place_m = None  # located at the next step
 
     def _solve(self, w, p, w_ref, lbw, ubw) -> SqpResult:
         if self.method == "ipopt":

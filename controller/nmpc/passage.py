@@ -115,6 +115,7 @@ def sweep(path: WaypointPath, progress_m: float, offset_m: float, segments,
     frac = (np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n - 1, n)
     pts = a[which] + frac[:, None] * (b - a)[which]
     s, d = path.frame(pts, progress_m - slab_m, s_end + slab_m)
+    s, d = _continuous(s, d, which, slab_m)
     ahead = (s >= progress_m) & (s <= s_end) & (np.abs(d) <= lateral_m)
     if not ahead.any():
         return None, NO_CHANNEL
@@ -132,6 +133,25 @@ def sweep(path: WaypointPath, progress_m: float, offset_m: float, segments,
                             offset_m)
     return (None if at is None else progress_m + at * slab_m), _channel(shifts, progress_m,
                                                                          slab_m)
+
+
+def _continuous(s: np.ndarray, d: np.ndarray, which: np.ndarray, slab_m: float):
+    """The samples' path coordinates (s, d) with points added where two neighbouring samples
+    of one segment lie more than a slab apart along the path, evenly between them: a wall
+    is continuous. Inside a bend the frame jumps from one leg to the next, and the inner
+    wall's samples skip the slabs at the corner (2 |d| tan(turn / 2) of them: 4 m at 6 m off
+    for 38 degrees), whose water then opened onto the bank behind the wall, and the sweep
+    found a way round a kayak through it (fuzz seed 1 case 102)."""
+    jump = np.flatnonzero((which[1:] == which[:-1]) & (np.abs(np.diff(s)) > slab_m))
+    if not len(jump):
+        return s, d
+    pieces = np.ceil(np.abs(s[jump + 1] - s[jump]) / (0.5 * slab_m)).astype(np.int64)
+    at = np.repeat(jump, pieces - 1)
+    frac = (np.arange(int((pieces - 1).sum())) - np.repeat(np.cumsum(pieces - 1) - (pieces - 1),
+                                                           pieces - 1) + 1) / np.repeat(pieces,
+                                                                                        pieces - 1)
+    return (np.concatenate([s, s[at] + frac * (s[at + 1] - s[at])]),
+            np.concatenate([d, d[at] + frac * (d[at + 1] - d[at])]))
 
 
 def walk_slabs(slab: np.ndarray, d: np.ndarray, n_slabs: int, lateral_m: float,

@@ -185,13 +185,18 @@ def reference_trajectory(path: WaypointPath, position, heading_rad: float, speed
                          horizon: int, step_s: float, progress_m: float = 0.0,
                          search_ahead_m: float | None = None, stop_at_m: float | None = None,
                          decel_mps2: float = 0.15, current=(0.0, 0.0),
-                         offset_m: float = 0.0) -> Reference:
+                         offset_m: float = 0.0, slow_to=None,
+                         back_to_stop: bool = False) -> Reference:
     """r_0..r_horizon for a boat at `position` with `heading_rad`.
 
     The closest point is searched on arc lengths [progress_m, progress_m + search_ahead_m]
     (the whole rest of the path if None): forward only, so the reference never runs back.
     With `stop_at_m` (an arc length: a blocked way ahead) the reference slows at `decel_mps2`
-    so that it comes to rest there, and holds there; one already past it holds where it is.
+    so that it comes to rest there, and holds there; one already past it holds where it is,
+    or with `back_to_stop` is at the stop (behind the boat) all along: a boat waiting for a
+    blocked way that drifts past its stop is brought back, not held wherever it drifts to
+    (held where it was, a boat waiting in a bend crept 2 m past its stop, to the inner bank
+    and into it: fuzz seed 1 case 102).
     With a `current` (north, east, m/s) the reference heading is the one that keeps the
     course on the path: the leg's direction turned into the current by the crab angle
     asin(V_across / u_water), as a helmsman holds a boat on a line across a stream; without
@@ -199,6 +204,11 @@ def reference_trajectory(path: WaypointPath, position, heading_rad: float, speed
     `offset_m` moves the reference across the path (+ to starboard), as the rules of the road
     ask when meeting or overtaking another vessel (`seamanship`): a number, or a function of
     the arc length (a gap off the path ahead, `passage.Channel`).
+    `slow_to` (arc length, speed): be down to that speed there, braking at `decel_mps2` (a
+    blind opening ahead, `blind_openings`): the reference brakes along the horizon as the
+    boat must, not at the speed allowed where it is now (which the NMPC followed with a lag
+    that brought a boat to a side canal at 1.4 m/s for 1.0, too fast to stop for the vessel
+    that came out of it: fuzz seed 1 case 146).
     """
     speed_mps = finite_number(speed_mps, "target speed")
     if speed_mps < 0:
@@ -206,7 +216,11 @@ def reference_trajectory(path: WaypointPath, position, heading_rad: float, speed
     s_max = None if search_ahead_m is None else progress_m + search_ahead_m
     s0, distance = path.project(position, s_min=progress_m, s_max=s_max)
     t = step_s * np.arange(horizon + 1)
-    if stop_at_m is None:
+    if back_to_stop and stop_at_m is not None and s0 > stop_at_m:
+        s, speed = np.full(horizon + 1, max(stop_at_m, 0.0)), np.zeros(horizon + 1)
+    elif slow_to is not None:
+        s, speed = _braking(s0, speed_mps, stop_at_m, slow_to, decel_mps2, t)
+    elif stop_at_m is None:
         s = s0 + speed_mps * t
         speed = np.full(horizon + 1, speed_mps)
     else:
@@ -228,6 +242,30 @@ def reference_trajectory(path: WaypointPath, position, heading_rad: float, speed
     states[:, 0:2], states[:, 2] = xy, psi
     states[:, 3] = np.where(s < path.length, speed, 0.0)
     return Reference(states, float(s0), float(distance), bool(s0 >= path.length - 1e-9))
+
+
+def _braking(s0: float, speed: float, stop_m, slow_to, decel: float, t: np.ndarray,
+             samples: int = 400):
+    """Arc lengths and speeds at times t of a point from s0 under the speed limit
+    v(s) = min(`speed`, sqrt(v_s^2 + 2 decel (s_s - s)) (v_s beyond s_s), sqrt(2 decel
+    (stop_m - s))) for `slow_to` = (s_s, v_s) and an optional stop: the time to each arc
+    length summed over a fine grid of it, then inverted."""
+    at, slow = float(slow_to[0]), float(slow_to[1])
+    reach = speed * float(t[-1]) + 1.0
+    grid = s0 + np.linspace(0.0, reach, samples)
+    v = np.minimum(speed, np.sqrt(slow * slow + 2.0 * decel * np.maximum(at - grid, 0.0)))
+    if stop_m is not None:
+        v = np.minimum(v, np.sqrt(2.0 * decel * np.maximum(stop_m - grid, 0.0)))
+    mean = 0.5 * (v[1:] + v[:-1])
+    moving = mean > 1e-6
+    dt = np.where(moving, (grid[1] - grid[0]) / np.where(moving, mean, 1.0), np.inf)
+    time = np.concatenate([[0.0], np.cumsum(dt)])
+    ends = np.flatnonzero(~np.isfinite(time))
+    last = int(ends[0]) if len(ends) else samples  # at rest from this sample on
+    if last <= 1:
+        return np.full_like(t, s0, dtype=float), np.zeros_like(t, dtype=float)
+    s = np.interp(t, time[:last], grid[:last])
+    return s, np.interp(s, grid, v)
 
 
 def _stopping(s0: float, speed: float, stop_m: float, decel: float, t: np.ndarray):

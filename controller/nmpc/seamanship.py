@@ -25,9 +25,13 @@ rules decide where the reference asks it to be, so that it passes the way other 
   while its room stays within `keep_side_m` (Rule 8: a track's noise does not switch the boat
   between sides, or between passing and following); a pass on the vessel's starboard side
   goes on while a vessel is met (it is out of that vessel's lane), one on its port side stops.
+  Beside a vessel the boat never changes sides (that is across its bow): with no room left on
+  its side it falls back and follows.
 - Crossing (Rule 15): a vessel that will cross the route ahead from the starboard side while
   the boat would be there is given way to by slowing: the reference stops short of the
-  crossing point until the vessel has cleared it (passing astern of it). A small craft
+  crossing point until the vessel has cleared it (passing astern of it), by R_b + d_v from
+  half its length, not its beam: out of a side canal a vessel turns into the channel, and
+  its hull then reaches half its length either way from where it crossed. A small craft
   (shorter than `small_craft_m`: a kayak, a rowing boat) is given way to from either side,
   and a vessel once given way to stays so until it has crossed (Rule 8: a track first seen
   short grows as its hull comes out from behind a corner; the boat does not then change its
@@ -143,7 +147,10 @@ def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed
                 # give way (to a small craft from either side); a decision to give way
                 # stands while the conflict lasts (Rule 8: no back and forth), though the
                 # track grows out of small craft as more of its hull comes into view
-                at = progress_m + crossing - (Rb + dv + bow_m + half_wid)
+                # short of where it crosses by its half length: a vessel that turns into
+                # the channel there swings its stern (or bow) that far toward the boat
+                # (seed 1 case 3: stopped short of its beam, 1.6 m from its turning stern)
+                at = progress_m + crossing - (Rb + dv + bow_m + max(half_wid, half_len))
                 # Rule 17(b): still on a collision course when the boat could only just
                 # stop short with its hardest braking, the give-way vessel has not acted:
                 # the boat stops short of the crossing point as when giving way (never a
@@ -233,6 +240,11 @@ def assess(tracks, path: WaypointPath, progress_m: float, offset_m: float, speed
             side = "starboard"  # on its starboard side, out of the lane of the vessel met
         elif chained:  # the vessel close ahead's side, if this one leaves room on it
             side = ahead_of[1] if (port_ok if ahead_of[1] == "port" else stbd_ok) else None
+        elif alongside and not (stbd_ok if offset_m > d else port_ok):
+            # beside it, the other side is reached only across its bow: the boat falls back
+            # (seed 1 case 109, varied: a kayak stopped ahead on the starboard side turned a
+            # starboard pass into a port one, and the boat cut across a barge's bow into it)
+            why = "no room on the side the boat is beside it"
         elif alongside and offset_m > d and stbd_ok:
             side = "starboard"  # beside it already: on the side the boat is on
         elif port_ok and (port_gap >= three_abreast or alongside or before == "port"):

@@ -196,3 +196,30 @@ def test_blind_perception_slows_the_boat_to_a_stop_and_it_goes_on_when_scans_ret
     assert blind and blind[0][0] == pytest.approx(5.0)
     assert max(r[2] for r in rows if 50.0 <= r[0] < 60.0) < 0.1
     assert rows[-1][2] > 1.0 and not any(r[4] for r in rows)
+
+
+def test_the_sweep_finds_no_way_through_the_bank_inside_a_bend():
+    """Inside a bend the path frame puts the inner wall's points near the corner on the next
+    leg, farther on, and leaves the slabs at the corner without them; the water there is
+    open to the bank behind the wall, and the sweep took a way round a kayak stopped across
+    the canal through the bank, 11 m off the path (fuzz seed 1 case 102). A wall is
+    continuous: the way is blocked at the kayak, from wherever before the bend."""
+    corner, turn = np.array([126.0, 0.0]), math.radians(-38.0)
+    path = waypoint_path([[0.0, 0.0], corner, corner + 120.0 * np.array(
+        [math.cos(turn), math.sin(turn)])])
+    walls = []
+    for side in (-6.2, 6.2):  # each bank: both legs moved across, meeting at the corner
+        a, b = path.at(np.array([0.0, 240.0]))[0]
+        normal = np.array([-math.sin(turn / 2), math.cos(turn / 2)]) / math.cos(turn / 2)
+        pts = [a + side * np.array([0.0, 1.0]), corner + side * normal,
+               b + side * np.array([-math.sin(turn), math.cos(turn)])]
+        for p, q in zip(pts[:-1], pts[1:]):
+            walls.append([*(0.5 * (p + q)), math.atan2(*(q - p)[::-1]), float(np.hypot(*(q - p)))])
+    xy, h = path.at(np.array([137.0]))
+    n = np.array([-math.sin(h[0]), math.cos(h[0])])
+    kayak = xy[0] + n * -1.0  # 1 m to port, across: 4.7 m left on either side
+    walls.append([*kayak, h[0] + math.pi / 2, 7.0])
+    for start in (100.0, 110.0, 120.0, 124.0):
+        at, channel = sweep(path, start, 0.0, np.array(walls), 6.0, 60.0, clearance_m=5.0)
+        assert at is not None and abs(at - 134.0) < 3.5, (start, at)
+        assert not len(channel.offset_m) or np.all(np.abs(channel.offset_m) < 6.2), start

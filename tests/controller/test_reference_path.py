@@ -86,3 +86,34 @@ def test_bad_waypoints_are_clear_errors(waypoints, words):
 def test_negative_target_speed_is_an_error():
     with pytest.raises(InputError, match="target speed"):
         reference_trajectory(waypoint_path([[0, 0], [1, 0]]), [0, 0], 0.0, -1.0, NP, TS)
+
+
+def test_a_slow_down_ahead_brakes_the_reference_along_the_horizon():
+    """`slow_to`: the reference keeps its speed until braking at `decel_mps2` brings it to
+    the slow speed where asked, then goes on at that speed; with a stop too, it rests there."""
+    path = waypoint_path([[0.0, 0.0], [200.0, 0.0]])
+    ref = reference_trajectory(path, [0.0, 0.0], 0.0, 2.0, NP, TS, decel_mps2=0.1,
+                               slow_to=(40.0, 1.0))
+    speed = ref.states[:, 3]
+    assert speed[0] == pytest.approx(2.0)
+    assert np.all(np.diff(speed) <= 1e-9)
+    x = ref.states[:, 0]
+    assert np.all(speed[x >= 40.5] == pytest.approx(1.0, abs=0.02))
+    braking = (x > 30.0) & (x < 39.0)  # v^2 = 1 + 2 a (40 - s) on the way down
+    assert np.allclose(speed[braking] ** 2, 1.0 + 0.2 * (40.0 - x[braking]), atol=0.05)
+    stopped = reference_trajectory(path, [0.0, 0.0], 0.0, 2.0, NP, TS, stop_at_m=30.0,
+                                   decel_mps2=0.1, slow_to=(40.0, 1.0))
+    assert stopped.states[-1, 0] == pytest.approx(30.0, abs=0.3)
+    assert stopped.states[-1, 3] == pytest.approx(0.0, abs=0.2)
+
+
+def test_a_boat_past_a_blocked_way_stop_is_brought_back_to_it():
+    """A boat that drifted past its stop holds where it is, or, waiting for a blocked way
+    (`back_to_stop`), is asked back to the stop: it keeps its distance from the obstruction."""
+    path = waypoint_path([[0.0, 0.0], [200.0, 0.0]])
+    held = reference_trajectory(path, [42.0, 0.0], 0.0, 2.0, NP, TS, stop_at_m=40.0)
+    assert np.allclose(held.states[:, 0], 42.0)
+    back = reference_trajectory(path, [42.0, 0.0], 0.0, 2.0, NP, TS, stop_at_m=40.0,
+                                back_to_stop=True)
+    assert np.allclose(back.states[:, 0], 40.0) and np.all(back.states[:, 3] == 0.0)
+    assert back.progress_m == pytest.approx(42.0)

@@ -58,6 +58,15 @@ def test_a_vessel_crossing_from_starboard_is_given_way_to():
     assert shaping.stop_at_m is not None and shaping.stop_at_m < 30.0
 
 
+def test_a_vessel_given_way_to_is_stopped_short_of_by_half_its_length():
+    """A vessel crossing out of a side canal turns into the channel where it crosses, and its
+    stern swings half its length toward the boat: the stop is R_b + d_v + the bow short of
+    that, not of its beam (seed 1 case 3: 1.6 m from a stern turning in front of the bow)."""
+    kind, shaping = _kind(Track(4, (30.0, 15.0), (0.0, -1.5), length_m=9.0, width_m=2.4))
+    assert kind == "give_way"
+    assert shaping.stop_at_m == pytest.approx(30.0 - (2.0 + 2.0 + 2.0 + 4.5), abs=0.5)
+
+
 def test_a_vessel_crossing_from_port_is_stood_on_for():
     kind, shaping = _kind(Track(4, (30.0, -15.0), (0.0, 1.5)))
     assert kind == "stand_on"
@@ -180,3 +189,20 @@ def test_a_side_chosen_for_overtaking_is_kept_through_a_track_s_noise():
     assert kinds == {3: ("overtaking", "starboard")} and shaping.offset_m > 0.0
     kinds, _ = _overtake([wide], sight_m=50.0, overtaking={3: "starboard"}, keep_side_m=0.0)
     assert kinds == {3: ("following", "")}
+
+
+def test_beside_a_vessel_the_boat_falls_back_rather_than_cross_its_bow():
+    """Beside a barge on its starboard side, that side closed ahead (a kayak stopped there,
+    fuzz seed 1 case 109 varied), the port side open: to pass on the port side the boat
+    would cut across the barge's bow (it did, into it); it falls back and follows."""
+    path, segs = _channel(((0, 0), (300, 0)))
+    segs = np.vstack([segs, [[10.0, 7.0, 0.0, 20.0]]])  # beside the barge, 7 m to starboard
+    barge = Track(2, (3.0, 0.0), (0.6, 0.0), length_m=20.0, width_m=4.0)
+    kw = dict(hull_radius_m=2.0, separation_m=2.0, vessel_separation_m=2.0, bow_m=2.0)
+    beside = assess([barge], path, 0.0, 5.0, 2.0, segs, **kw)
+    assert beside.encounters[0].kind == "following", beside.reason
+    assert "no room on the side the boat is beside it" in beside.reason
+    segs[-1, 0] = 40.0  # the same, 30 m on, and the boat astern of it: the port side will do
+    astern = assess([Track(2, (40.0, 0.0), (0.6, 0.0), length_m=20.0, width_m=4.0)], path,
+                    0.0, 0.0, 2.0, segs, **kw)
+    assert astern.encounters[0].side == "port"

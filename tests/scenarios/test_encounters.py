@@ -3,6 +3,7 @@ tests: each scenario file under tests/scenarios/encounters/ runs with its own pe
 (known walls: the vessel handed over at once, with its velocity) and with the LiDAR, and must
 end with no controller failure and no collision, its criteria met."""
 
+import csv
 from dataclasses import replace
 from pathlib import Path
 
@@ -142,3 +143,50 @@ def test_a_boat_overtaken_close_beside_a_barge_keeps_its_track(tmp_path):
     assert summary["tracking"]["id_switches"]["overtaken-1"] <= 4, summary["tracking"]
     failed = check_criteria(scenario, summary)
     assert not failed, "; ".join(failed)
+
+
+def test_a_vessel_crossing_out_of_a_blind_side_canal_is_given_way_to_in_time(tmp_path):
+    """Fuzz seed 1 case 146 (LiDAR): a vessel comes out of a side canal on the starboard
+    side and crosses ahead. The reference held the blind-opening speed cap of where the boat
+    was over the whole horizon and the boat lagged it, came to the opening at 1.4 m/s and
+    passed 0.59 m from the vessel; braking along the horizon it gives way and keeps 2 m."""
+    scenario = load_scenario(REGRESSIONS / "vessel_crossing_out_of_a_blind_side_canal.toml")
+    summary = run_scenario(scenario, tmp_path, plots=False).summary
+    hull = summary["vessels"][0]["min_hull_distance_m"]
+    assert hull >= 2.0, hull
+    failed = check_criteria(scenario, summary)
+    assert not failed, "; ".join(failed)
+
+
+def test_a_kayak_stopped_across_a_bend_is_waited_for_without_going_on(tmp_path):
+    """Fuzz seed 1 case 102 (known walls): a kayak stopped across the canal just past a
+    bend leaves no way by; the sweep found one through the inner bank, and a boat backing
+    off was read 30 m across the canal, so the boat stopped and went on four times, and
+    once crept into the bank. It waits now from well before the bend, never goes on, and
+    keeps 2 m from the kayak (260 s of the case: its kayak never moves on)."""
+    scenario = replace(load_scenario(REGRESSIONS / "kayak_stopped_across_a_bend.toml"),
+                       duration_s=260.0)
+    result = run_scenario(scenario, tmp_path, plots=False)
+    summary = result.summary
+    assert not summary["collision"], summary["status"]
+    failed = check_criteria(scenario, summary)
+    assert not failed, "; ".join(failed)
+    with open(tmp_path / "log.csv") as f:
+        rows = [(float(r["time_s"]), r["status"]) for r in csv.DictReader(f)]
+    waiting = [t for t, status in rows if status.startswith("waiting")]
+    assert waiting and waiting[0] < 150.0, waiting[:1]
+    going = [t for t, status in rows if t > waiting[0] and status == "success"]
+    assert not going, going[:3]
+
+
+def test_a_boat_waiting_for_a_kayak_stopped_across_keeps_off_it(tmp_path):
+    """Fuzz seed 1 case 3 (LiDAR): a kayak stopped across a narrow canal past a side canal's
+    mouth blocks the way; the waiting boat, led about the mouth by the sweep's line into the
+    gap beside the kayak, came to 0.98 m of it. Waiting on the rules' line it keeps 2 m."""
+    scenario = replace(load_scenario(
+        REGRESSIONS / "kayak_stopped_across_a_canal_past_a_side_canal.toml"), duration_s=200.0)
+    summary = run_scenario(scenario, tmp_path, plots=False).summary
+    assert not summary["collision"], summary["status"]
+    kayak = next(v for v in summary["vessels"] if v["name"] == "drifting-0")
+    assert kayak["min_hull_distance_m"] >= 2.0, kayak
+    assert summary["time_waiting_s"] > 60.0, summary["time_waiting_s"]
