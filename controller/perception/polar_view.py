@@ -3,10 +3,11 @@ per bin, and how steeply the own hull rises per bin (`clusters.free_space` asks 
 a cluster's ends, on most scans with a vessel in view).
 
 Compiled (`polar_view.c`, C as the other perception kernels, see `controller.kernels`) around
-numpy's float32 arctan2, so the bins are numpy's bit for bit: per scan two kernel calls and one
-arctan2 over every viewpoint at once instead of a dozen numpy passes and a slow `ufunc.at` per
-viewpoint. `nearest_numpy` and `hull_slope_numpy` are the twins: the tests' reference and the
-fallback where nothing can be compiled.
+numpy's float32 arctan2, so the bins are numpy's bit for bit: every return's bin once a scan
+(one arctan2 over every viewpoint at once), then ranges only in the few bins asked, instead
+of whole images by a dozen numpy passes and a slow `ufunc.at` per viewpoint.
+`nearest_numpy` and `hull_slope_numpy` (the whole images) are the twins: the tests'
+reference and the fallback where nothing can be compiled.
 """
 
 from __future__ import annotations
@@ -55,6 +56,16 @@ def bearing_bin(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.minimum(a.astype(np.intp), N_BINS - 1)
 
 
+def _bins(lib, fx: np.ndarray, fy: np.ndarray, shape) -> np.ndarray:
+    """The bearing bins (int16, `shape`) of float32 offsets: numpy's arctan2, then the
+    kernel's binning (`bearing_bin`'s arithmetic)."""
+    angle = _scratch("angle", len(fx), np.float32)
+    np.arctan2(fy, fx, out=angle)
+    out = np.empty(shape, np.int16)
+    lib.polar_bins(len(fx), pointer(angle), _SCALE, _HALF, N_BINS, pointer(out))
+    return out
+
+
 class OccluderView:
     """The returns that can hide something (N, 2: body-frame x, y) as each viewpoint (V, 2+)
     sees them: `nearest(k, bins)` is the squared range of the nearest in each bin seen from
@@ -96,15 +107,11 @@ class OccluderView:
         nv, n = len(v), len(p)
         vx, vy = np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1])
         fx, fy = _scratch("fx", nv * n, np.float32), _scratch("fy", nv * n, np.float32)
-        angle = _scratch("angle", nv * n, np.float32)
         size = p.itemsize
         offsets = lib.polar_offsets_f32 if p.dtype == np.float32 else lib.polar_offsets_f64
         offsets(n, p.__array_interface__["data"][0], p.strides[0] // size,
                 p.strides[1] // size, nv, pointer(vx), pointer(vy), pointer(fx), pointer(fy))
-        np.arctan2(fy, fx, out=angle)
-        out = np.empty((nv, n), np.int16)
-        lib.polar_bins(nv * n, pointer(angle), _SCALE, _HALF, N_BINS, pointer(out))
-        return out
+        return _bins(lib, fx, fy, (nv, n))
 
 
 class HullView:
@@ -142,17 +149,14 @@ class HullView:
         nv, n = len(v), len(h)
         vx, vy = np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1])
         fx, fy = _scratch("fx", nv * n, np.float32), _scratch("fy", nv * n, np.float32)
-        angle = _scratch("angle", nv * n, np.float32)
         lib.polar_hull_offsets(n, pointer(h), nv, pointer(vx), pointer(vy), pointer(fx),
                                pointer(fy))
-        np.arctan2(fy, fx, out=angle)
-        out = np.empty((nv, n), np.int16)
-        lib.polar_bins(nv * n, pointer(angle), _SCALE, _HALF, N_BINS, pointer(out))
-        return out
+        return _bins(lib, fx, fy, (nv, n))
 
 
 def nearest_numpy(occluders: np.ndarray, viewpoints: np.ndarray) -> np.ndarray:
-    """`nearest`'s numpy twin."""
+    """(V, bins) the squared range of the nearest return per bearing bin seen from each
+    viewpoint (inf: none): `OccluderView`'s numpy twin, the whole image."""
     return np.stack([_polar_ranges(occluders - v[:2]) if v[:2].any()
                      else _polar_ranges(occluders) for v in np.asarray(viewpoints, float)])
 
@@ -167,7 +171,8 @@ def _polar_ranges(xy: np.ndarray) -> np.ndarray:
 
 
 def hull_slope_numpy(hull_returns: np.ndarray, viewpoints: np.ndarray) -> np.ndarray:
-    """`hull_slope`'s numpy twin."""
+    """(V, bins) the own hull's steepest rise per bearing bin seen from each viewpoint
+    (-inf: none): `HullView`'s numpy twin, the whole image."""
     v = np.asarray(viewpoints, float).reshape(-1, 3)
     out = np.full((len(v), N_BINS), -np.inf)
     h = np.asarray(hull_returns, float).reshape(-1, 3)

@@ -17,6 +17,16 @@ def _viewpoints(rng):
     return np.vstack([[0.0, 0.0, np.nan], units])
 
 
+def _assert_asked_bins_are(ask, image, rng):
+    """`ask(k, bins)` gives the numpy image's row k at those bins: 40 drawn (one twice), and
+    all of them."""
+    asked = rng.integers(0, N_BINS, 40)
+    asked[1] = asked[0]
+    for k in range(len(image)):
+        np.testing.assert_array_equal(ask(k, asked), image[k, asked])
+        np.testing.assert_array_equal(ask(k, np.arange(N_BINS)), image[k])
+
+
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 @pytest.mark.parametrize("seed", range(8))
 def test_nearest_returns_asked_are_the_numpy_image(seed, dtype):
@@ -27,12 +37,7 @@ def test_nearest_returns_asked_are_the_numpy_image(seed, dtype):
     view = _viewpoints(rng)
     view[1, :2] = occluders[1]
     image = nearest_numpy(occluders, view)
-    seen = OccluderView(occluders, view)
-    asked = rng.integers(0, N_BINS, 40)
-    asked[1] = asked[0]  # a bin asked twice
-    for k in range(len(view)):
-        np.testing.assert_array_equal(seen.nearest(k, asked), image[k, asked])
-        np.testing.assert_array_equal(seen.nearest(k, np.arange(N_BINS)), image[k])
+    _assert_asked_bins_are(OccluderView(occluders, view).nearest, image, rng)
     assert np.isinf(image).any() and np.isfinite(image).any()
 
 
@@ -44,12 +49,7 @@ def test_hull_slopes_asked_are_the_numpy_image(seed):
     view = _viewpoints(rng)
     hull[0] = (*view[1, :2], 1.0)  # on a unit's axis: no bearing, left out
     image = hull_slope_numpy(hull, view)
-    seen = HullView(hull, view)
-    asked = rng.integers(0, N_BINS, 40)
-    asked[1] = asked[0]  # a bin asked twice
-    for k in range(len(view)):
-        np.testing.assert_array_equal(seen.slope(k, asked), image[k, asked])
-        np.testing.assert_array_equal(seen.slope(k, np.arange(N_BINS)), image[k])
+    _assert_asked_bins_are(HullView(hull, view).slope, image, rng)
     assert np.all(image[0] == -np.inf)  # no height known: nothing cuts the view
     assert np.isfinite(image[1:]).any() and (image[1:] == -np.inf).any()
 
