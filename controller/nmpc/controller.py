@@ -34,6 +34,8 @@ from .vessel_slots import at_rest, predict_vessels, rest_outlines
 METHODS = ("rti", "sqp", "ipopt")
 STUCK_SQP_ITERATIONS = 10
 """SQP iterations of a restart for a boat held at rest (`NmpcController._stuck`)."""
+BACKING_OFF = "backing off"
+"""What the rules' reason says while the boat backs off, held at rest (`_back_off`)."""
 PLAUSIBLE_TOL = 1e-3
 """How far past its bounds a solved plan may lie before it counts as garbage."""
 
@@ -71,6 +73,8 @@ class SolverStats:
     elastic_vessels: float = 0.0  # ... and of a vessel row (exact-penalty rows; 0: none)
     restarted: bool = False  # solved again from the reference: the plan from the last one
     # broke obstacle rows by more than `NmpcConfig.restart_elastic_h`, and that did less
+    backing_off: bool = False  # backing off along the path, the plans having held the boat
+    # at rest though restarted (`NmpcConfig.back_off_m`)
 
     @property
     def time_glue_s(self) -> float:
@@ -317,6 +321,8 @@ class NmpcController:
         self._overtaking: dict = {}  # track id: the side overtaken on last period
         self._restart_rest = 0  # steps left before another restart from the reference
         self._stuck_s = 0.0  # how long the plan has held the boat at rest (`_stuck`)
+        self._back_to: float | None = None  # backing off to this arc length (`_stuck`)
+        self._backed: tuple[int, float] = (0, 0.0)  # back-offs in a row, where the last began
         self._elastic: tuple | None = None  # this step's rows' violation, if a restart chose
         self._rules_clear_s = 0.0
         self._prepared: _Prepared | None = None
@@ -567,13 +573,28 @@ class NmpcController:
         """The plan has held the boat at rest (under 0.2 m/s) for `restart_stuck_s`, going
         less than a quarter of the reference's way over the horizon, while the reference
         asks for more than 0.5 m/s and nothing asks the boat to wait."""
+        c = self.config
         want = float(reference.states[-1, 3])
         if (setup.stop is None and x_init[3] < 0.2 and want > 0.5
-                and self._travel(w) < 0.25 * want * self.config.horizon * self.config.step_s):
+                and self._travel(w) < 0.25 * want * c.horizon * c.step_s):
             self._stuck_s += elapsed_s
         else:
             self._stuck_s = 0.0
-        return self._stuck_s >= self.config.restart_stuck_s
+        if c.back_off_m and c.restart_stuck_s and self._stuck_s >= 2.0 * c.restart_stuck_s:
+            self._back_off()
+        return bool(c.restart_stuck_s) and self._stuck_s >= c.restart_stuck_s
+
+    def _back_off(self) -> None:
+        """Held at rest though restarted: back off along the path, by `back_off_m` the first
+        time and one more each time held again before getting `back_off_m` past where the
+        last back-off began (at most three), to come on again with room to swing round what
+        held the boat (a kayak stopped across the canal, the way on in the gap beside it)."""
+        count, began = self._backed
+        place = float(self._place_m)
+        count = count + 1 if count and place < began + self.config.back_off_m else 1
+        self._backed = (count, place)
+        self._back_to = max(place - min(count, 3) * self.config.back_off_m, 0.0)
+        self._stuck_s = 0.0
 
     # -- pieces -----------------------------------------------------------------------------
     def _setup(self, x: np.ndarray, inputs: "_Inputs", elapsed: float,
@@ -612,6 +633,13 @@ class NmpcController:
         stop_at = None if stop is None else stop.at_m
         if rules.stop_at_m is not None:
             stop_at = rules.stop_at_m if stop_at is None else min(stop_at, rules.stop_at_m)
+        backing = self._back_to is not None and self._place_m > self._back_to + 0.5
+        if backing:  # held at rest by its plans: back to there, then on again (`_back_off`)
+            stop_at = self._back_to if stop_at is None else min(stop_at, self._back_to)
+            said = f"{BACKING_OFF} {self._place_m - self._back_to:.0f} m: held at rest"
+            rules = replace(rules, reason=f"{rules.reason}; {said}" if rules.reason else said)
+        else:
+            self._back_to = None
         ref_speed = speed if rules.speed_mps is None else min(speed, rules.speed_mps)
         ref_speed, blind, slow_to = self._blind_speed(float(s[0]), x[:2], segs, ref_speed,
                                                       float(x[3]))
@@ -621,12 +649,13 @@ class NmpcController:
         # leads to is shut (led to it, a boat waiting at a side canal's mouth was steered
         # about the mouth, its thrust for the rudder driving it on to 1 m of a kayak
         # stopped across the canal: fuzz seed 1 case 3)
-        offset = (rules.offset_m if stop is not None and stop.blocked_at_m is not None
-                  else self._line(rules.offset_m))
+        offset = (rules.offset_m if backing or stop is not None and stop.blocked_at_m
+                  is not None else self._line(rules.offset_m))
         reference = reference_trajectory(self._path, x[:2], x[2], ref_speed, c.horizon,
-                                         c.step_s, self._progress_m, self.search_ahead_m,
+                                         c.step_s, self._back_to if backing else
+                                         self._progress_m, self.search_ahead_m,
                                          stop_at, c.stop_decel_mps2, inputs.current, offset,
-                                         slow_to, back_to_stop=stop is not None
+                                         slow_to, back_to_stop=backing or stop is not None
                                          and stop.blocked_at_m is not None
                                          and stop_at == stop.at_m)
         planned = reference.states[:, :2] if guess is None else guess[self._xy_at]
@@ -653,11 +682,11 @@ class NmpcController:
     def _memory(self) -> tuple:
         """What `_setup` moves on, to be put back when a prepared setup goes unused."""
         return (self._way.memory(), self._rules_stop, self._rules_clear_s, self._slots_prev,
-                self._giving_way, self._overtaking, self._place_m)
+                self._giving_way, self._overtaking, self._place_m, self._back_to)
 
     def _restore(self, memory: tuple) -> None:
         (way, self._rules_stop, self._rules_clear_s, self._slots_prev,
-         self._giving_way, self._overtaking, self._place_m) = memory
+         self._giving_way, self._overtaking, self._place_m, self._back_to) = memory
         self._way.restore(way)
 
     def _rules(self, s: float, d: float, vessels, segments, speed_mps: float,
@@ -937,6 +966,7 @@ class NmpcController:
             rules=rules.reason, fed_back=fed_back, set_up_in_preparation=set_up,
             time_feedback_s=times[0],
             time_preparation_s=preparation_s, elastic_segments=elastic[0],
-            elastic_vessels=elastic[1], restarted=restarted)
+            elastic_vessels=elastic[1], restarted=restarted,
+            backing_off=BACKING_OFF in rules.reason)
         return NmpcStep(command, rates, plan[self._states_boat_at], plan[self._inputs_rates_at],
                         plan[self._slack_ref_at], reference, stats)

@@ -101,6 +101,9 @@ class NmpcConfig:
     restart_stuck_s: float = 5.0  # a boat held at rest this long by a plan that stays while
     # the reference goes on, nothing asking it to wait, is planned again from the reference
     # by SQP to convergence (0: never)
+    back_off_m: float = 8.0  # still held so after as long again, the boat backs off this far
+    # along its path (twice, three times as far if held again) and comes on once more: the
+    # swing round an obstruction that no plan from rest beside it finds (0: never)
     vessel_l1_share: float = 0.5  # the vessel rows' share of those penalties: where a
     # crowded canal leaves no plan clear of everything, another boat's predicted, inflated
     # hull gives before a wall does (a meeting in a bend steered the boat into the quay)
@@ -202,7 +205,7 @@ class NmpcConfig:
         if self.obstacle_rows not in OBSTACLE_ROWS:
             bad("obstacle_rows", f"choose one of {', '.join(OBSTACLE_ROWS)}")
         for name in ("obstacle_l1", "obstacle_l2", "vessel_l1_share", "restart_elastic_h",
-                     "restart_stuck_s"):
+                     "restart_stuck_s", "back_off_m"):
             if getattr(self, name) < 0:
                 bad(name, "must not be negative")
         if self.obstacle_rows == "exact-penalty" and not self.obstacle_l1 > 0:

@@ -165,6 +165,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
     fallback_steps = 0
     elastic_max, elastic_steps = [0.0, 0.0], 0  # the NMPC's soft obstacle rows (h units)
     restarts = 0  # steps the NMPC solved again from the reference (rows broken too far)
+    back_offs, was_backing = 0, False  # times it backed off along its path, held at rest
     waiting_before = ""
     takes = inspect.signature(controller.step).parameters
     takes_blind, takes_vessels = "blind" in takes, "vessels" in takes
@@ -232,6 +233,9 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
             waiting = str(decision.stats.get("waiting", ""))
             fallback_steps += bool(decision.stats.get("fallback", ""))
             restarts += bool(decision.stats.get("restarted", False))
+            backing = bool(decision.stats.get("backing_off", False))
+            back_offs += backing and not was_backing
+            was_backing = backing
             elastic = decision.stats.get("elastic")
             if elastic is not None:
                 elastic_max = [max(a, b) for a, b in zip(elastic_max, elastic)]
@@ -320,7 +324,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
         # about metres per metre of margin; exact-penalty rows only) and on how many steps
         "elastic": {"max_segment_rows": _round(elastic_max[0]),
                     "max_vessel_rows": _round(elastic_max[1]), "steps": elastic_steps,
-                    "restarts": restarts},
+                    "restarts": restarts, "back_offs": back_offs},
     }
     episodes = metrics.waiting_episodes(rows_waiting, rows_speed, cfg.control_period_s)
     summary.update({k: _round(v) for k, v in episodes.items()})

@@ -63,17 +63,41 @@ def test_a_plan_that_holds_the_boat_at_rest_is_made_again_from_the_reference(tmp
     """A kayak stopped across half a narrow canal, the boat come up to it behind a barge
     (fuzz seed 1 case 47, known walls): the real-time iteration's plan held the boat at rest
     beside the gap for the rest of the run; planned again from the reference once it had
-    for 5 s, the boat goes round and reaches the goal. (With the kayak's sides walls like
+    for 5 s (or, where that finds nothing, backed off for a new run at it), the boat goes
+    round and reaches the goal. (With the kayak's sides walls like
     any others, `rest_keep_m` 0: grown by 1.5 m it leaves no way past, and the boat waits.)"""
     scenario = with_options(load_scenario(
         REGRESSIONS / "boat_held_at_rest_behind_a_kayak_stopped_across_the_canal.toml"),
         rest_keep_m=0.0)
     summary = run_scenario(scenario, tmp_path, plots=False).summary
-    assert summary["elastic"]["restarts"] >= 1
+    assert summary["elastic"]["restarts"] + summary["elastic"]["back_offs"] >= 1
     assert not check_criteria(scenario, summary)
     off = with_options(scenario, restart_stuck_s=0.0)
     summary = run_scenario(off, tmp_path / "off", plots=False).summary
     assert not summary["reached_goal"], summary["status"]
+
+
+def test_a_boat_still_held_at_rest_backs_off_and_comes_on_again(tmp_path):
+    """A kayak stopped across half a canal past a side canal, the boat come up to 5 m of it
+    following a barge (fuzz seed 1 case 47 as generated on 2026-12-06, known walls): planned
+    again from the reference it stayed at rest to the time limit; backing off 8 m along its
+    path, it swings round the kayak 2 m off and reaches the goal."""
+    scenario = load_scenario(
+        REGRESSIONS / "boat_held_at_rest_until_it_backs_off_from_a_stopped_kayak.toml")
+    summary = run_scenario(scenario, tmp_path, plots=False).summary
+    assert summary["elastic"]["back_offs"] >= 1
+    assert not check_criteria(scenario, summary)
+
+
+@pytest.mark.slow
+def test_without_backing_off_the_boat_stays_held(tmp_path):
+    """The same run with `back_off_m` 0: held at rest before the kayak to the time limit."""
+    scenario = with_options(load_scenario(
+        REGRESSIONS / "boat_held_at_rest_until_it_backs_off_from_a_stopped_kayak.toml"),
+        back_off_m=0.0)
+    summary = run_scenario(scenario, tmp_path, plots=False).summary
+    assert not summary["reached_goal"], summary["status"]
+    assert summary["elastic"]["back_offs"] == 0
 
 
 def test_a_kayak_at_rest_is_passed_2_m_off_hull_to_hull(tmp_path):
