@@ -7,7 +7,10 @@ moored boats along a quay and piers now and then; a current of up to 0.5 m/s; on
 vessels, each met, overtaken, followed, crossing (from the side canal, from either side) or
 drifting (a kayak). Every vessel is timed to reach its encounter when the own boat does, at
 the place where it is hardest: in the bend, at the side canal's mouth, beside a moored boat.
-Scripted vessels give way to nobody, so they are kept apart by construction (`_kept_apart`).
+Scripted vessels give way to nobody, so they are kept apart by construction (`_kept_apart`),
+and one whose hull would come within `VESSEL_GAP_M` of another's sets off later, as a skipper
+waits for a vessel to clear (a launch crossing out of a side canal through a barge, a kayak
+drifting into a barge's way; `_give_way`).
 The judgement comes from the true poses in each run's summary: no exception, collision or
 controller failure, at least `min_hull_m` hull to hull from every vessel; the goal, fallback
 steps, tracks on walls and what the rules of the road asked are reported beside.
@@ -16,6 +19,8 @@ steps, tracks on walls and what the rules of the road asked are reported beside.
 from __future__ import annotations
 
 import math
+import re
+import tomllib
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -26,6 +31,7 @@ KINDS = ("meeting", "overtaken", "followed", "crossing", "drifting")
 SPEED_MPS = 2.0  # the own boat's target speed (the scenario default)
 BARGE_HALF_BEAM_M = 3.0  # the widest followed barge's (30 m long, beam a fifth of that)
 VESSEL_GAP_M = 1.0  # scripted vessels keep this far apart, and from the quays
+GIVE_WAY_STEP_S, GIVE_WAY_MAX_S = 5.0, 60.0  # a vessel in another's way waits in such steps
 
 
 @dataclass(frozen=True)
@@ -39,6 +45,7 @@ class Case:
     width_m: float
     perception: str
     vessels: tuple = field(default_factory=tuple)  # vessel names, in the kinds' order
+    waited_s: float = 0.0  # the longest a vessel was held back from another's way
 
 
 def generate(seed: int, index: int, perception: str = "mixed") -> Case:
@@ -99,10 +106,11 @@ def _draw(rng, seed: int, index: int, perception: str) -> Case:
         names.append(f"{kind}-{k}")
         kept.append(kind)
         duration = max(duration, end_s)
-    kinds = kept
+    duration = max(duration, (canal.route_length + 20.0) / SPEED_MPS * 1.6 + 30.0)
+    vessels, names, kinds, waited = _give_way(vessels, names, kept, duration, index)
+    duration += waited
     lines.insert(0, f"# canalnav fuzz case {index} of seed {seed}: {', '.join(kinds)} at the "
                     f"{place}")
-    duration = max(duration, (canal.route_length + 20.0) / SPEED_MPS * 1.6 + 30.0)
     lines += [f"duration_s = {math.ceil(duration)}", f"seed = {index}", ""]
     lines += body + obstacles
     if current > 0:
@@ -112,7 +120,7 @@ def _draw(rng, seed: int, index: int, perception: str) -> Case:
     lines += ["[sensors]", f"perception = {toml_value(perception)}", "",
               "[controller]", 'type = "nmpc"', "d_p_m = 2.0", ""]
     return Case(f"case-{index:04d}", "\n".join(lines), tuple(kinds), place, width, perception,
-                tuple(names))
+                tuple(names), waited)
 
 
 class _Canal:
@@ -259,6 +267,59 @@ def _vessel(kind: str, k: int, canal: _Canal, rng, place: str,
              f"wander_degps = {float(rng.uniform(0.0, 15.0)):.1f}",
              f"distance_m = {max(4.0, w - 6.0):.1f}", ""]
     return "\n".join(lines), t_meet + 90.0
+
+
+def _give_way(vessels: list, names: list, kinds: list, duration: float, seed: int):
+    """The vessels with each, in turn, started later (by `GIVE_WAY_STEP_S` at a time, up to
+    `GIVE_WAY_MAX_S`) until its hull keeps `VESSEL_GAP_M` from those before it all the run,
+    sampled every half second; one that cannot is left out. (tables, names, kinds, and the
+    longest wait: the run is made that much longer)"""
+    run_s = duration + GIVE_WAY_MAX_S
+    times = np.arange(0.0, run_s, 0.5)
+    kept: list = []  # (text, name, kind, vessel, centres, radius)
+    waited = 0.0
+    for text, name, kind in zip(vessels, names, kinds):
+        table = tomllib.loads(text)["vessel"][0]
+        for delay in np.arange(0.0, GIVE_WAY_MAX_S + 1e-9, GIVE_WAY_STEP_S):
+            mine = _moved(table, float(delay), run_s, seed * 7919 + 11 + len(kept))
+            centres = np.column_stack([np.interp(times, mine.times, mine.poses[:, i])
+                                       for i in (0, 1)])
+            radius = 0.5 * math.hypot(mine.hull.length_m, mine.hull.beam_m)
+            if all(_apart(mine, centres, radius, k[3], k[4], k[5], times) for k in kept):
+                later = re.sub(r"start_s = ([0-9.]+)",
+                               lambda m: f"start_s = {float(m.group(1)) + delay:.1f}", text,
+                               count=1) if delay else text
+                kept.append((later, name, kind, mine, centres, radius))
+                waited = max(waited, float(delay))
+                break
+    return [k[0] for k in kept], [k[1] for k in kept], [k[2] for k in kept], waited
+
+
+def _moved(table: dict, delay: float, duration_s: float, wander_seed: int):
+    """A [[vessel]] table's motion started `delay` later, as the scenario file makes it
+    (`wander_seed`: the file's, for the vessel's place in it)."""
+    from scenarios.world.vessels import Hull, Vessel
+
+    hull = Hull(**table["hull"])
+    if "route" in table:
+        r = table["route"]
+        return Vessel.on_route(table["name"], hull, r["waypoints"], r["speed_mps"], duration_s,
+                               r.get("start_s", 0.0) + delay, r.get("waits", ()))
+    c = table["course"]
+    return Vessel.on_course(table["name"], hull, (c["x_m"], c["y_m"]),
+                            math.radians(c["course_deg"]), c["speed_mps"], duration_s,
+                            c.get("start_s", 0.0) + delay, c.get("wander_degps", 0.0),
+                            wander_seed, c.get("distance_m"))
+
+
+def _apart(a, centres_a, radius_a, b, centres_b, radius_b, times) -> bool:
+    """Vessels a and b keep more than `VESSEL_GAP_M` hull to hull at every one of `times`
+    (outlines compared only where their centres come near)."""
+    from scenarios.results.encounters import polygon_distance
+
+    near = np.hypot(*(centres_a - centres_b).T) <= radius_a + radius_b + VESSEL_GAP_M
+    return all(polygon_distance(a.outline_at(t), b.outline_at(t)) > VESSEL_GAP_M
+               for t in times[near])
 
 
 def _hull(rng, lo: float, hi: float, barge: bool = False) -> tuple[list[str], float]:
