@@ -186,17 +186,19 @@ def reference_trajectory(path: WaypointPath, position, heading_rad: float, speed
                          search_ahead_m: float | None = None, stop_at_m: float | None = None,
                          decel_mps2: float = 0.15, current=(0.0, 0.0),
                          offset_m: float = 0.0, slow_to=None,
-                         back_to_stop: bool = False) -> Reference:
+                         back_to_stop: bool = False, back_mps: float = 0.5) -> Reference:
     """r_0..r_horizon for a boat at `position` with `heading_rad`.
 
     The closest point is searched on arc lengths [progress_m, progress_m + search_ahead_m]
     (the whole rest of the path if None): forward only, so the reference never runs back.
     With `stop_at_m` (an arc length: a blocked way ahead) the reference slows at `decel_mps2`
     so that it comes to rest there, and holds there; one already past it holds where it is,
-    or with `back_to_stop` is at the stop (behind the boat) all along: a boat waiting for a
-    blocked way that drifts past its stop is brought back, not held wherever it drifts to
-    (held where it was, a boat waiting in a bend crept 2 m past its stop, to the inner bank
-    and into it: fuzz seed 1 case 102).
+    or with `back_to_stop` goes back to the stop (behind the boat) astern at `back_mps`,
+    braking to rest there: a boat waiting for a blocked way that drifts past its stop is
+    brought back, not held wherever it drifts to (held where it was, a boat waiting in a
+    bend crept 2 m past its stop, to the inner bank and into it: fuzz seed 1 case 102). (A
+    reference at the stop all along drove a boat 3 m past it back at 1.8 m/s astern, 26 m
+    past the stop, and on again: a waiting boat surging to and fro, fuzz seed 1 case 69.)
     With a `current` (north, east, m/s) the reference heading is the one that keeps the
     course on the path: the leg's direction turned into the current by the crab angle
     asin(V_across / u_water), as a helmsman holds a boat on a line across a stream; without
@@ -217,7 +219,8 @@ def reference_trajectory(path: WaypointPath, position, heading_rad: float, speed
     s0, distance = path.project(position, s_min=progress_m, s_max=s_max)
     t = step_s * np.arange(horizon + 1)
     if back_to_stop and stop_at_m is not None and s0 > stop_at_m:
-        s, speed = np.full(horizon + 1, max(stop_at_m, 0.0)), np.zeros(horizon + 1)
+        back, speed = _stopping(0.0, back_mps, s0 - max(stop_at_m, 0.0), decel_mps2, t)
+        s, speed = s0 - back, -speed
     elif slow_to is not None:
         s, speed = _braking(s0, speed_mps, stop_at_m, slow_to, decel_mps2, t)
     elif stop_at_m is None:

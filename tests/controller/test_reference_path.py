@@ -109,11 +109,18 @@ def test_a_slow_down_ahead_brakes_the_reference_along_the_horizon():
 
 def test_a_boat_past_a_blocked_way_stop_is_brought_back_to_it():
     """A boat that drifted past its stop holds where it is, or, waiting for a blocked way
-    (`back_to_stop`), is asked back to the stop: it keeps its distance from the obstruction."""
+    (`back_to_stop`), is asked back to the stop, astern at 0.5 m/s and braking to rest there
+    (not all at once: a boat 3 m past was driven back at 1.8 m/s, 26 m past the stop)."""
     path = waypoint_path([[0.0, 0.0], [200.0, 0.0]])
     held = reference_trajectory(path, [42.0, 0.0], 0.0, 2.0, NP, TS, stop_at_m=40.0)
     assert np.allclose(held.states[:, 0], 42.0)
     back = reference_trajectory(path, [42.0, 0.0], 0.0, 2.0, NP, TS, stop_at_m=40.0,
                                 back_to_stop=True)
-    assert np.allclose(back.states[:, 0], 40.0) and np.all(back.states[:, 3] == 0.0)
+    x, u = back.states[:, 0], back.states[:, 3]
+    assert x[0] == pytest.approx(42.0) and np.all(np.diff(x) <= 1e-12) and x[-1] < 41.9
+    assert np.all(x >= 40.0 - 1e-9) and np.all((u <= 0.0) & (u >= -0.5))  # astern, gently
+    near = reference_trajectory(path, [40.3, 0.0], 0.0, 2.0, NP, TS, stop_at_m=40.0,
+                                back_to_stop=True, decel_mps2=0.15)
+    assert near.states[-1, 0] == pytest.approx(40.0, abs=1e-6)  # braked to rest at the stop
+    assert near.states[-1, 3] == pytest.approx(0.0, abs=1e-6)
     assert back.progress_m == pytest.approx(42.0)
