@@ -357,60 +357,72 @@ def _load_obstacles(doc: _Table) -> tuple:
 def _load_vessels(doc: _Table, world: CanalWorld, duration_s: float, seed: int) -> tuple:
     """[[vessel]]: name, [vessel.hull] and a motion, [vessel.route] or [vessel.course]; each
     must start on open water, keep off the walls and not start inside another object."""
-    from .world.vessels import HULL_SHAPES, Hull, Vessel
-
     out = []
     for k, v in enumerate(doc.tables("vessel")):
-        name = v.string("name", f"vessel {k}")
-        h = v.table("hull", required=True)
-        hull_args = dict(length_m=h.number("length_m", required=True, low=0, strict=True),
-                         beam_m=h.number("beam_m", required=True, low=0, strict=True),
-                         height_m=h.number("height_m", 1.5, low=0, strict=True),
-                         shape=h.string("shape", "pointed", choices=HULL_SHAPES))
-        h.done()
-        hull = Hull(**hull_args)
-        route, course = v.table("route"), v.table("course")
-        if (route is None) == (course is None):
-            raise v.err("route", "give the vessel a [vessel.route] (waypoints and a speed) or "
-                        "a [vessel.course] (start, course and speed), one of the two")
-        if route is not None:
-            motion = route
-            waypoints = route.points("waypoints", required=True, min_points=2)
-            if np.any(np.hypot(*np.diff(waypoints, axis=0).T) <= 0):
-                raise route.err("waypoints", "repeats a point")
-            speed = route.number("speed_mps", required=True, low=0)
-            start = route.number("start_s", 0.0, low=0)
-            waits = []
-            if route.has("waits"):
-                raw = route.raw("waits")
-                ok = isinstance(raw, list) and all(
-                    isinstance(w, list) and len(w) == 2 and isinstance(w[0], int)
-                    and not isinstance(w[0], bool) and 0 < w[0] < len(waypoints)
-                    and _is_number(w[1]) and w[1] >= 0 for w in raw)
-                if not ok:
-                    raise route.err("waits", f"expected [waypoint index (1..{len(waypoints) - 1}), "
-                                    f"seconds >= 0] pairs, got {raw!r}")
-                waits = [(int(a), float(b)) for a, b in raw]
-            route.done()
-            vessel = Vessel.on_route(name, hull, waypoints, speed, duration_s, start, waits)
-            where, line = route, waypoints
-        else:
-            motion = course
-            start_xy = (course.number("x_m", required=True), course.number("y_m", required=True))
-            heading = math.radians(course.number("course_deg", required=True))
-            speed = course.number("speed_mps", required=True, low=0)
-            start = course.number("start_s", 0.0, low=0)
-            wander = course.number("wander_degps", 0.0, low=0)
-            distance = course.number("distance_m", None, low=0, strict=True)
-            course.done()
-            vessel = Vessel.on_course(name, hull, start_xy, heading, speed, duration_s, start,
-                                      wander, seed=seed * 7919 + 11 + k, distance_m=distance)
-            where, line = course, vessel.poses[:, :2]
-        v.done()
-        _check_vessel(world, vessel, where, "waypoints" if route is not None else "x_m", line,
-                      out)
+        vessel, where, key, line = _read_vessel(v, k, duration_s, seed)
+        _check_vessel(world, vessel, where, key, line, out)
         out.append(vessel)
     return tuple(out)
+
+
+def vessel_from_table(table: dict, index: int, duration_s: float, seed: int,
+                      source: str = "vessel") -> "Vessel":
+    """One [[vessel]] table's vessel as a scenario file with `seed` makes it, the `index`-th
+    of the file (its wander's seed), read and checked as a table but not placed in a world
+    (no check against walls or other vessels): for a generator that moves a vessel in time."""
+    return _read_vessel(_Table(table, f"vessel[{index}]", source), index, duration_s, seed)[0]
+
+
+def _read_vessel(v: _Table, k: int, duration_s: float, seed: int):
+    """The k-th [[vessel]] table read: (vessel, the motion's table, the key that places it,
+    the line it follows), for `_check_vessel`."""
+    from .world.vessels import HULL_SHAPES, Hull, Vessel
+
+    name = v.string("name", f"vessel {k}")
+    h = v.table("hull", required=True)
+    hull_args = dict(length_m=h.number("length_m", required=True, low=0, strict=True),
+                     beam_m=h.number("beam_m", required=True, low=0, strict=True),
+                     height_m=h.number("height_m", 1.5, low=0, strict=True),
+                     shape=h.string("shape", "pointed", choices=HULL_SHAPES))
+    h.done()
+    hull = Hull(**hull_args)
+    route, course = v.table("route"), v.table("course")
+    if (route is None) == (course is None):
+        raise v.err("route", "give the vessel a [vessel.route] (waypoints and a speed) or "
+                    "a [vessel.course] (start, course and speed), one of the two")
+    if route is not None:
+        waypoints = route.points("waypoints", required=True, min_points=2)
+        if np.any(np.hypot(*np.diff(waypoints, axis=0).T) <= 0):
+            raise route.err("waypoints", "repeats a point")
+        speed = route.number("speed_mps", required=True, low=0)
+        start = route.number("start_s", 0.0, low=0)
+        waits = []
+        if route.has("waits"):
+            raw = route.raw("waits")
+            ok = isinstance(raw, list) and all(
+                isinstance(w, list) and len(w) == 2 and isinstance(w[0], int)
+                and not isinstance(w[0], bool) and 0 < w[0] < len(waypoints)
+                and _is_number(w[1]) and w[1] >= 0 for w in raw)
+            if not ok:
+                raise route.err("waits", f"expected [waypoint index (1..{len(waypoints) - 1}), "
+                                f"seconds >= 0] pairs, got {raw!r}")
+            waits = [(int(a), float(b)) for a, b in raw]
+        route.done()
+        vessel = Vessel.on_route(name, hull, waypoints, speed, duration_s, start, waits)
+        where, line = route, waypoints
+    else:
+        start_xy = (course.number("x_m", required=True), course.number("y_m", required=True))
+        heading = math.radians(course.number("course_deg", required=True))
+        speed = course.number("speed_mps", required=True, low=0)
+        start = course.number("start_s", 0.0, low=0)
+        wander = course.number("wander_degps", 0.0, low=0)
+        distance = course.number("distance_m", None, low=0, strict=True)
+        course.done()
+        vessel = Vessel.on_course(name, hull, start_xy, heading, speed, duration_s, start,
+                                  wander, seed=seed * 7919 + 11 + k, distance_m=distance)
+        where, line = course, vessel.poses[:, :2]
+    v.done()
+    return vessel, where, "waypoints" if route is not None else "x_m", line
 
 
 def _check_vessel(world: CanalWorld, vessel, t: _Table, key: str, line, others) -> None:

@@ -281,7 +281,7 @@ def _give_way(vessels: list, names: list, kinds: list, duration: float, seed: in
     for text, name, kind in zip(vessels, names, kinds):
         table = tomllib.loads(text)["vessel"][0]
         for delay in np.arange(0.0, GIVE_WAY_MAX_S + 1e-9, GIVE_WAY_STEP_S):
-            mine = _moved(table, float(delay), run_s, seed * 7919 + 11 + len(kept))
+            mine = _moved(table, float(delay), run_s, seed, len(kept))
             centres = np.column_stack([np.interp(times, mine.times, mine.poses[:, i])
                                        for i in (0, 1)])
             radius = 0.5 * math.hypot(mine.hull.length_m, mine.hull.beam_m)
@@ -295,21 +295,15 @@ def _give_way(vessels: list, names: list, kinds: list, duration: float, seed: in
     return [k[0] for k in kept], [k[1] for k in kept], [k[2] for k in kept], waited
 
 
-def _moved(table: dict, delay: float, duration_s: float, wander_seed: int):
-    """A [[vessel]] table's motion started `delay` later, as the scenario file makes it
-    (`wander_seed`: the file's, for the vessel's place in it)."""
-    from scenarios.world.vessels import Hull, Vessel
+def _moved(table: dict, delay: float, duration_s: float, seed: int, index: int):
+    """The `index`-th [[vessel]] table's vessel, started `delay` later, as the scenario file
+    with `seed` makes it."""
+    from scenarios.scenario_file import vessel_from_table
 
-    hull = Hull(**table["hull"])
-    if "route" in table:
-        r = table["route"]
-        return Vessel.on_route(table["name"], hull, r["waypoints"], r["speed_mps"], duration_s,
-                               r.get("start_s", 0.0) + delay, r.get("waits", ()))
-    c = table["course"]
-    return Vessel.on_course(table["name"], hull, (c["x_m"], c["y_m"]),
-                            math.radians(c["course_deg"]), c["speed_mps"], duration_s,
-                            c.get("start_s", 0.0) + delay, c.get("wander_degps", 0.0),
-                            wander_seed, c.get("distance_m"))
+    motion = "route" if "route" in table else "course"
+    start = table[motion].get("start_s", 0.0) + delay
+    later = {**table, motion: {**table[motion], "start_s": start}}
+    return vessel_from_table(later, index, duration_s, seed)
 
 
 def _apart(a, centres_a, radius_a, b, centres_b, radius_b, times) -> bool:

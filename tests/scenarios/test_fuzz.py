@@ -149,8 +149,8 @@ def test_scripted_vessels_keep_out_of_each_others_way():
     waited, pairs = 0, 0
     for k in range(40):
         case = generate(1, k, "known-walls")
-        vessels = parse_scenario(case.text, f"{case.name}.toml").world.vessels
-        times = np.arange(0.0, parse_scenario(case.text, "x.toml").duration_s, 0.5)
+        scenario = parse_scenario(case.text, f"{case.name}.toml")
+        vessels, times = scenario.world.vessels, np.arange(0.0, scenario.duration_s, 0.5)
         waited += case.waited_s > 0
         for i, a in enumerate(vessels):
             for b in vessels[:i]:
