@@ -572,7 +572,8 @@ class NmpcController:
     def _stuck(self, w, x_init, reference, setup, elapsed_s: float) -> bool:
         """The plan has held the boat at rest (under 0.2 m/s) for `restart_stuck_s`, going
         less than a quarter of the reference's way over the horizon, while the reference
-        asks for more than 0.5 m/s and nothing asks the boat to wait."""
+        asks for more than 0.5 m/s and nothing asks the boat to wait. (Asked only while
+        `restart_stuck_s` is set.)"""
         c = self.config
         want = float(reference.states[-1, 3])
         if (setup.stop is None and x_init[3] < 0.2 and want > 0.5
@@ -580,9 +581,9 @@ class NmpcController:
             self._stuck_s += elapsed_s
         else:
             self._stuck_s = 0.0
-        if c.back_off_m and c.restart_stuck_s and self._stuck_s >= 2.0 * c.restart_stuck_s:
+        if c.back_off_m and self._stuck_s >= 2.0 * c.restart_stuck_s:
             self._back_off()
-        return bool(c.restart_stuck_s) and self._stuck_s >= c.restart_stuck_s
+        return self._stuck_s >= c.restart_stuck_s
 
     def _back_off(self) -> None:
         """Held at rest though restarted: back off along the path, by `back_off_m` the first
