@@ -135,13 +135,3 @@ def ask_below_cap(cap_mps: float, boat_speed_mps: float) -> float:
     if boat_speed_mps <= cap_mps:
         return cap_mps
     return max(2.0 * cap_mps - boat_speed_mps, 0.5 * cap_mps)
-
-
-def across_first(offset_m: float, boat_offset_m: float, step_m: float) -> float:
-    """The offset across the path to ask of a boat braking for a blind opening: the one
-    wanted, but at most `step_m` from where the boat is (`boat_offset_m`). A boat with a
-    steered thruster moves across by thrust, which drives it on as well: asked to move 4.85 m
-    to starboard for a meeting and to slow from 1.5 to 0.5 m/s at once, the NMPC kept the
-    thrust up for the turn and came to the side canal at 1.46 m/s (fuzz seed 1 case 48). So
-    the move across is taken a step at a time while the boat is over its cap."""
-    return boat_offset_m + min(max(offset_m - boat_offset_m, -step_m), step_m)

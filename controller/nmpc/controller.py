@@ -24,7 +24,7 @@ from ..errors import InputError, SolverError, finite_number
 from .problem import NU, NX, NX_BOAT, NmpcConfig, ParamLayout, build_ocp, pack_params
 from .reference import Reference, WaypointPath, reference_trajectory, waypoint_path
 from .rti import QpOptions, QpStep, SqpResult, sqp
-from .blind_openings import across_first, ask_below_cap, blind_opening_ahead, blind_speed_cap
+from .blind_openings import ask_below_cap, blind_opening_ahead, blind_speed_cap
 from .passage import WayAhead
 from .seamanship import Shaping, assess
 from .segment_slots import SLOT_FIELDS, check_segments, kept_in_place, select_checked
@@ -652,8 +652,6 @@ class NmpcController:
         # stopped across the canal: fuzz seed 1 case 3)
         offset = (rules.offset_m if backing or stop is not None and stop.blocked_at_m
                   is not None else self._line(rules.offset_m))
-        if blind and c.blind_lateral_m and not callable(offset) and x[3] > ref_speed + 0.1:
-            offset = across_first(offset, float(d[0]), c.blind_lateral_m)
         reference = reference_trajectory(self._path, x[:2], x[2], ref_speed, c.horizon,
                                          c.step_s, self._back_to if backing else
                                          self._progress_m, self.search_ahead_m,

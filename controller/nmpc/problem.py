@@ -144,11 +144,6 @@ class NmpcConfig:
     blind_speed_mps: float | None = 1.0
     blind_margin_m: float = 15.0
     blind_depth_m: float = 25.0
-    # Over that speed, the reference moves across the path (the rules' offset) at most this
-    # far from the boat at a time (0: at once): braking comes first, and the steered thrust
-    # that moves a boat across also drives it on (fuzz seed 1 case 48 kept to starboard at
-    # 1.5 m/s for 0.5 and met the vessel coming out with its bow in the vessel's lane)
-    blind_lateral_m: float = 1.0
     boat: BoatParams = field(default=IDENTIFIED)
 
     def __post_init__(self) -> None:
@@ -187,8 +182,7 @@ class NmpcConfig:
                 bad(name, "must not be negative")
         if self.blind_speed_mps is not None and self.blind_speed_mps < 0:
             bad("blind_speed_mps", "must be a speed >= 0 (0 or None: no blind-opening rule)")
-        for name in ("stop_margin_m", "resume_after_s", "blind_margin_m", "blind_lateral_m",
-                     "sight_m",
+        for name in ("stop_margin_m", "resume_after_s", "blind_margin_m", "sight_m",
                      "oncoming_mps", "oncoming_room_m"):
             if getattr(self, name) < 0:
                 bad(name, "must not be negative")

@@ -216,28 +216,6 @@ def test_a_boat_waiting_for_a_kayak_stopped_across_keeps_off_it(tmp_path):
     assert summary["time_waiting_s"] > 60.0, summary["time_waiting_s"]
 
 
-def test_a_boat_braking_for_a_blind_opening_moves_across_a_step_at_a_time(tmp_path):
-    """Fuzz seed 1 case 48 (LiDAR): a launch met while a workboat comes out of a blind side
-    canal on the starboard side. Asked to move 4.85 m across and to brake from 1.5 to
-    0.5 m/s at once, the boat kept its thrust up for the turn and stopped with its bow in the
-    workboat's lane; moving across 1 m at a time while over the cap, it gives way 2 m off."""
-    scenario = load_scenario(
-        REGRESSIONS / "meeting_kept_to_starboard_while_braking_for_a_blind_side_canal.toml")
-    summary = run_scenario(scenario, tmp_path, plots=False).summary
-    failed = check_criteria(scenario, summary)
-    assert not failed, "; ".join(failed)
-
-
-@pytest.mark.slow
-def test_asked_across_at_once_the_boat_meets_the_workboat_in_its_lane(tmp_path):
-    """The same run with `blind_lateral_m` 0 (the move across asked at once): a collision."""
-    scenario = with_options(load_scenario(
-        REGRESSIONS / "meeting_kept_to_starboard_while_braking_for_a_blind_side_canal.toml"),
-        blind_lateral_m=0.0)
-    summary = run_scenario(scenario, tmp_path, plots=False).summary
-    assert summary["collision"], summary["status"]
-
-
 def test_a_plan_breaking_its_wall_rows_in_a_gap_is_solved_again(tmp_path):
     """Fuzz seed 1 case 252 (known walls): a kayak stopped before a moored boat in a bend,
     9 m left to the inner bank. The plan broke its wall rows by about 0.5 step after step
