@@ -321,6 +321,7 @@ class NmpcController:
         self._overtaking: dict = {}  # track id: the side overtaken on last period
         self._restart_rest = 0  # steps left before another restart from the reference
         self._stuck_s = 0.0  # how long the plan has held the boat at rest (`_stuck`)
+        self._broken_s = 0.0  # how long the QPs' rows have broken past restart_broken_h
         self._back_to: float | None = None  # backing off to this arc length (`_stuck`)
         self._backed: tuple[int, float] = (0, 0.0)  # back-offs in a row, where the last began
         self._elastic: tuple | None = None  # this step's rows' violation, if a restart chose
@@ -524,20 +525,24 @@ class NmpcController:
         """RTI follows the plan it has: one that passes a vessel on the wrong side of its
         predicted hull (ahead of a kayak crossing, not stopping short as the rules ask) stays
         that plan step after step, breaking obstacle rows by more and more. Where the QP's
-        rows broke by more than `restart_elastic_h`, the step is solved again from the
-        reference (the rules' plan, `_safe_guess`) and the one that breaks them less (by at
-        least half) is kept. A plan can also hold the boat at rest for good, the way on
+        rows broke by more than `restart_elastic_h`, or have broken by more than
+        `restart_broken_h` at every step for `restart_broken_s`, the step is solved again from
+        the reference (the rules' plan, `_safe_guess`) and the one that breaks them less (by
+        at least half) is kept. A plan can also hold the boat at rest for good, the way on
         beside a stopped kayak needing a swing no single step from it finds: after
         `restart_stuck_s` of that, SQP to convergence from the reference, kept where it goes
         further and breaks the rows no more. (result, whether it was the restart's)."""
         c = self.config
         qp = getattr(self, "_qp", None)
-        if qp is None or not (c.restart_elastic_h or c.restart_stuck_s):
+        if qp is None or not (c.restart_elastic_h or c.restart_broken_s or c.restart_stuck_s):
             return result, False
         first = qp.elastic()
         stuck = bool(c.restart_stuck_s) and self._stuck(result.w, x_init, reference, setup,
                                                         elapsed_s)
-        broken = bool(c.restart_elastic_h) and max(first) > c.restart_elastic_h
+        level = max(first)
+        self._broken_s = self._broken_s + elapsed_s if level > c.restart_broken_h else 0.0
+        broken = (bool(c.restart_elastic_h) and level > c.restart_elastic_h
+                  or bool(c.restart_broken_s) and self._broken_s >= c.restart_broken_s - 1e-9)
         if not (broken or stuck):
             return result, False
         if self._restart_rest > 0:  # the last restart did no better: not again for a second
@@ -554,7 +559,7 @@ class NmpcController:
                          max(second) <= max(first) + 1e-9
                          and self._travel(retry.w) > self._travel(result.w) + 1.0):
             self._elastic = second
-            self._stuck_s = 0.0
+            self._stuck_s = self._broken_s = 0.0
             return self._merge(result, retry), True
         self._elastic = first
         self._restart_rest = int(round(1.0 / self.config.control_period_s))

@@ -55,7 +55,7 @@ def test_a_plan_breaking_its_rows_far_is_solved_again_from_the_reference(tmp_pat
     summary = run_scenario(scenario, tmp_path, plots=False).summary
     assert summary["elastic"]["restarts"] >= 1
     assert not check_criteria(scenario, summary)
-    off = with_options(scenario, restart_elastic_h=0.0)
+    off = with_options(scenario, restart_elastic_h=0.0, restart_broken_s=0.0)
     assert check_criteria(off, run_scenario(off, tmp_path / "off", plots=False).summary)
 
 
@@ -219,8 +219,8 @@ def test_a_boat_waiting_for_a_kayak_stopped_across_keeps_off_it(tmp_path):
 def test_a_plan_breaking_its_wall_rows_in_a_gap_is_solved_again(tmp_path):
     """Fuzz seed 1 case 252 (known walls): a kayak stopped before a moored boat in a bend,
     9 m left to the inner bank. The plan broke its wall rows by about 0.5 step after step
-    and turned the boat into the bank; solved again from the reference once they break by
-    0.3, it takes the gap and reaches the goal."""
+    and turned the boat into the bank; solved again from the reference once they have
+    broken by more than 0.3 for a second, it takes the gap and reaches the goal."""
     scenario = load_scenario(REGRESSIONS / "kayak_stopped_before_a_moored_boat_in_a_bend.toml")
     summary = run_scenario(scenario, tmp_path, plots=False).summary
     assert summary["elastic"]["restarts"] >= 1
@@ -231,8 +231,8 @@ def test_a_plan_breaking_its_wall_rows_in_a_gap_is_solved_again(tmp_path):
 @pytest.mark.slow
 def test_restarted_only_past_a_unit_the_boat_runs_into_the_bank(tmp_path):
     """The same run restarting only plans that break their rows by more than 1 unit (the
-    threshold before): a collision with the inner bank."""
+    rule before, `restart_broken_s` 0): a collision with the inner bank."""
     scenario = with_options(load_scenario(
-        REGRESSIONS / "kayak_stopped_before_a_moored_boat_in_a_bend.toml"), restart_elastic_h=1.0)
+        REGRESSIONS / "kayak_stopped_before_a_moored_boat_in_a_bend.toml"), restart_broken_s=0.0)
     summary = run_scenario(scenario, tmp_path, plots=False).summary
     assert summary["collision"], summary["status"]
