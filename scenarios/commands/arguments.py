@@ -24,3 +24,22 @@ def whole_number(minimum: int = 0):
 
 
 seed_number = whole_number(0)  # numpy's generators take no negative seeds
+
+
+def case_numbers(text: str) -> tuple[int, ...]:
+    """The type of an option that takes case numbers: "3,69,129", ranges "0-49", or both
+    ("0-9,48"); ascending, each once."""
+    numbers = set()
+    for part in text.split(","):
+        lo, dash, hi = part.strip().partition("-")
+        try:
+            a = int(lo)
+            b = int(hi) if dash else a
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"expected case numbers like 3,69,129 or 0-49, got {text!r}") from None
+        if a < 0 or b < a:
+            raise argparse.ArgumentTypeError(
+                f"case numbers are whole numbers >= 0, a range low-high, got {part.strip()!r}")
+        numbers.update(range(a, b + 1))
+    return tuple(sorted(numbers))

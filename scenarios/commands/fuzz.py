@@ -1,10 +1,16 @@
 """`canalnav fuzz --cases N --seed S --out DIR`: seeded random encounters, each written as a
 scenario file, run on the study engine and judged (`scenarios/studies/fuzz.py`).
 
-DIR gets `cases/` (the scenario files), the study's folder (`results.csv`, each run's
-folder under `runs/`), `fuzz.json` (the figures) and `report.md` (the failures worst first,
-each with the command that reproduces it; the rules of the road per encounter kind; every
-case). Prints the figures as JSON; exits 1 when a case failed the rule.
+DIR gets `cases/` (the scenario files), `fuzz-study.toml` (the study run), the study's
+folder (`results.csv`, each run's folder under `runs/`), `fuzz.json` (the figures and each
+case's verdict) and `report.md` (the failures worst first, each with the command that
+reproduces it; the rules of the road per encounter kind; every case). Prints the figures as
+JSON; exits 1 when a case failed the rule.
+
+To try a change on the cases that matter: `--only 3,69,129` runs those cases of the seed
+(the same files as in the full run), `--set PATH=VALUE` changes a key of every case (as
+`canalnav run --set`, e.g. `--set controller.rest_keep_m=1.0`), and `--against DIR` lists
+the cases whose outcome changed since the run in DIR.
 """
 
 from __future__ import annotations
@@ -12,7 +18,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from scenarios.commands.arguments import whole_number
+from scenarios.commands.arguments import case_numbers, whole_number
 
 
 def register(sub) -> None:
@@ -25,21 +31,57 @@ def register(sub) -> None:
         "a bend or a side canal, moored boats, currents, one to three vessels met, overtaken, "
         "followed, crossing or drifting, timed to meet where it is hardest), run them on the "
         "study engine and judge each from the true poses. The same seed gives the same cases.")
-    p.add_argument("--cases", type=whole_number(1), default=100, help="how many cases (100)")
+    which = p.add_mutually_exclusive_group()
+    which.add_argument("--cases", type=whole_number(1), default=100,
+                       help="how many cases: 0 to N-1 (100)")
+    which.add_argument("--only", type=case_numbers, metavar="CASES",
+                       help="only these cases of the seed, e.g. 3,69,129 or 0-49 (the same "
+                       "files as in a full run)")
     p.add_argument("--seed", type=whole_number(0), default=0, help="the fuzz's seed (0)")
     p.add_argument("--out", required=True, metavar="DIR", help="where cases and results go")
     p.add_argument("--perception", choices=("mixed", "lidar", "known-walls"), default="mixed",
                    help="each case's perception (mixed: drawn per case)")
     p.add_argument("--min-hull-m", type=float, default=2.0,
                    help="least hull-to-hull distance a case must keep (2 m)")
+    p.add_argument("--set", action="append", default=[], metavar="PATH=VALUE",
+                   type=_assignment, help="change a key of every case by its dotted path, as "
+                   "a TOML value (e.g. --set controller.rest_keep_m=1.0); repeatable")
+    p.add_argument("--against", metavar="DIR",
+                   help="an earlier fuzz's --out: report the cases whose outcome changed")
     add_engine_options(p)
     p.set_defaults(func=run)
+
+
+def _assignment(text: str):
+    from scenarios.commands.run import _assignment as assignment
+
+    return assignment(text)
+
+
+def _earlier_verdicts(folder: str) -> list[dict]:
+    """The per-case verdicts in an earlier fuzz's fuzz.json (`--against`)."""
+    from controller.errors import InputError
+
+    path = Path(folder) / "fuzz.json"
+    try:
+        figures = json.loads(path.read_text())
+    except OSError as exc:
+        raise InputError(f"fuzz: --against {folder}: cannot read {path}: "
+                         f"{exc.strerror or exc}") from None
+    except json.JSONDecodeError as exc:
+        raise InputError(f"fuzz: --against {folder}: {path} is not JSON ({exc})") from None
+    verdicts = figures.get("verdicts") if isinstance(figures, dict) else None
+    if not isinstance(verdicts, list):
+        raise InputError(f"fuzz: --against {folder}: {path} holds no per-case verdicts "
+                         "(written by an older canalnav fuzz): run that fuzz again")
+    return verdicts
 
 
 def run(args) -> int:
     from controller.errors import InputError
     from scenarios.commands.sweep import check_engine_options
-    from scenarios.studies.fuzz import conformance, generate, judge, report_markdown
+    from scenarios.studies.fuzz import (changes_against, conformance, generate, judge,
+                                        report_markdown, verdict_record)
     from scenarios.studies.overrides import toml_value
     from scenarios.studies.sweep import require_dask, run_study
     from scenarios.studies.sweep_spec import parse_study
@@ -50,8 +92,10 @@ def run(args) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError(f"fuzz: --out {out} is a file, not a folder")
+    before = _earlier_verdicts(args.against) if args.against else None
     require_dask()
-    cases = [generate(args.seed, k, args.perception) for k in range(args.cases)]
+    numbers = args.only if args.only is not None else range(args.cases)
+    cases = [generate(args.seed, k, args.perception) for k in numbers]
     folder = out / "cases"
     try:
         folder.mkdir(parents=True, exist_ok=True)
@@ -62,9 +106,14 @@ def run(args) -> int:
         path = folder / f"{case.name}.toml"
         path.write_text(case.text)
         paths.append(str(path.resolve()))
-    text = (f"# canalnav fuzz: {args.cases} cases of seed {args.seed}\n[study]\n"
+    text = (f"# canalnav fuzz: {len(cases)} cases of seed {args.seed}\n[study]\n"
             f"name = \"fuzz-{args.seed}\"\nscenarios = {toml_value(paths)}\n")
-    study = parse_study(text, out.resolve() / "fuzz-study.toml")
+    if args.set:  # every case with the same changes: one value each
+        text += "[overrides]\n" + "".join(f"{toml_value(path)} = [{toml_value(value)}]\n"
+                                         for path, value in args.set)
+    study_file = out.resolve() / "fuzz-study.toml"
+    study_file.write_text(text)  # (what ran; and a bad --set names it in its error)
+    study = parse_study(text, study_file)
     outcome = run_study(study, out / "study", scheduler=args.scheduler, workers=args.workers,
                         resume=args.resume, progress=not args.quiet,
                         timeout_s=args.connect_timeout)
@@ -79,8 +128,10 @@ def run(args) -> int:
         summaries[name] = summary
         verdicts.append(judge(name, row, summary, args.min_hull_m))
     conform = conformance(cases, summaries)
-    (out / "report.md").write_text(report_markdown(verdicts, by_case, str(out), args.seed,
-                                                   conform, outcome.wall_s))
+    changes = None if before is None else changes_against(before, verdicts)
+    (out / "report.md").write_text(report_markdown(
+        verdicts, by_case, str(out), args.seed, conform, outcome.wall_s,
+        against=None if changes is None else (args.against, changes), overrides=args.set))
     hulls = [v.min_hull_m for v in verdicts if v.min_hull_m is not None]
     figures = {
         "seed": args.seed, "cases": len(cases), "ran": len(verdicts),
@@ -101,7 +152,11 @@ def run(args) -> int:
         "failures": [{"case": v.case, "why": v.why,
                       "command": f"canalnav run {out}/cases/{v.case}.toml"}
                      for v in sorted(verdicts, key=lambda v: -v.severity) if not v.passed],
+        "set": [f"{path}={toml_value(value)}" for path, value in args.set],
     }
+    if changes is not None:
+        figures["against"] = {"folder": args.against, **changes}
+    figures["verdicts"] = [verdict_record(v) for v in sorted(verdicts, key=lambda v: v.case)]
     (out / "fuzz.json").write_text(json.dumps(figures, indent=2) + "\n")
     print(json.dumps(figures, indent=2))
     return 0 if figures["failed"] == 0 and len(verdicts) == len(cases) else 1

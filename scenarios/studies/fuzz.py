@@ -387,6 +387,39 @@ def judge(case: str, row: dict, summary: dict | None, min_hull_m: float = 2.0) -
                    int((s.get("elastic") or {}).get("steps") or 0))
 
 
+def verdict_record(v: Verdict) -> dict:
+    """What fuzz.json keeps of a verdict, for a later run to compare against (`--against`)."""
+    return {"case": v.case, "passed": v.passed, "why": v.why, "reached_goal": v.reached_goal,
+            "min_hull_m": v.min_hull_m}
+
+
+def changes_against(before: list[dict], verdicts: list[Verdict]) -> dict:
+    """The cases run both times whose outcome changed, from `before` (`verdict_record`s of an
+    earlier run of the same seed) to `verdicts`: failing now and not before, the other way
+    round, and the goal lost or reached; each entry "case: before -> now"."""
+    old = {r["case"]: r for r in before}
+    out = {"common_cases": 0, "newly_failing": [], "no_longer_failing": [], "goal_lost": [],
+           "goal_reached": []}
+
+    def said(r):
+        return r["why"] or "passed"
+
+    for v in sorted(verdicts, key=lambda v: v.case):
+        r = old.get(v.case)
+        if r is None:
+            continue
+        out["common_cases"] += 1
+        now = verdict_record(v)
+        if r["passed"] != v.passed:
+            key = "no_longer_failing" if v.passed else "newly_failing"
+            out[key].append(f"{v.case}: {said(r)} -> {said(now)}")
+        if r["reached_goal"] != v.reached_goal:
+            out["goal_reached" if v.reached_goal else "goal_lost"].append(
+                f"{v.case}: {'goal' if r['reached_goal'] else 'no goal'} -> "
+                f"{'goal' if v.reached_goal else 'no goal'}")
+    return out
+
+
 def conformance(cases: list[Case], summaries: dict) -> dict:
     """Per encounter kind: how the vessels were passed (the side, from the true poses) and,
     for meetings, the share of the meeting spent in the starboard half."""
@@ -411,9 +444,11 @@ def conformance(cases: list[Case], summaries: dict) -> dict:
 
 
 def report_markdown(verdicts: list[Verdict], cases: dict, out_dir: str, seed: int,
-                    conform: dict, wall_s: float) -> str:
+                    conform: dict, wall_s: float, against: tuple[str, dict] | None = None,
+                    overrides=()) -> str:
     """report.md: the failures worst first, each with the command that reproduces it, then
-    the figures."""
+    the figures; with `against` (an earlier run's folder and `changes_against`), the cases
+    whose outcome changed since; `overrides` ((path, value) pairs) are named at the top."""
     failed = sorted((v for v in verdicts if not v.passed), key=lambda v: (-v.severity, v.case))
     n = len(verdicts)
     goal = sum(v.reached_goal for v in verdicts)
@@ -423,6 +458,17 @@ def report_markdown(verdicts: list[Verdict], cases: dict, out_dir: str, seed: in
              f" ({100.0 * goal / max(n, 1):.1f} %)",
              f"- least hull to hull over all cases: "
              f"{min(hulls):.2f} m" if hulls else "- no vessel came near", ""]
+    if overrides:
+        lines[-1:-1] = ["- every case run with " + ", ".join(
+            f"`--set {p}={toml_value(v)}`" for p, v in overrides)]
+    if against is not None:
+        where, ch = against
+        lines += [f"## Against {where} ({ch['common_cases']} cases run both times)", ""]
+        for key, title in (("newly_failing", "failing now"), ("no_longer_failing",
+                                                             "no longer failing"),
+                           ("goal_lost", "goal lost"), ("goal_reached", "goal reached")):
+            lines.append(f"- {title}: " + ("; ".join(ch[key]) if ch[key] else "none"))
+        lines.append("")
     if failed:
         lines += ["## Failures, worst first", "", "| case | what | kinds | place | command |",
                   "| --- | --- | --- | --- | --- |"]

@@ -158,3 +158,57 @@ def test_scripted_vessels_keep_out_of_each_others_way():
                 gap = min(polygon_distance(a.outline_at(t), b.outline_at(t)) for t in times)
                 assert gap > 1.0, (case.name, a.name, b.name, gap)
     assert waited >= 1 and pairs >= 10
+
+
+def test_case_numbers_take_lists_and_ranges():
+    import argparse
+
+    from scenarios.commands.arguments import case_numbers
+
+    assert case_numbers("3,69,129") == (3, 69, 129)
+    assert case_numbers("48, 0-3,2") == (0, 1, 2, 3, 48)
+    for bad in ("3-x", "5-2", "-1", ""):
+        with pytest.raises(argparse.ArgumentTypeError):
+            case_numbers(bad)
+
+
+def test_a_run_against_an_earlier_one_lists_the_cases_that_changed():
+    from scenarios.studies.fuzz import changes_against, verdict_record
+
+    cases = {c.name: c for c in (generate(5, 0), generate(5, 1), generate(5, 2))}
+    before = [judge("case-0000", {**ROW, "collision": True}, {"status": "collision at 9 s"}),
+              judge("case-0001", ROW, {"reached_goal": True}),
+              judge("case-0002", ROW, {"reached_goal": False})]
+    now = [judge("case-0000", ROW, {"reached_goal": True}),
+           judge("case-0001", {**ROW, "controller_failed": True}, {"status": "cf"}),
+           judge("case-0002", ROW, {"reached_goal": True}),
+           judge("case-0003", ROW, {"reached_goal": True})]  # (not run before)
+    records = json.loads(json.dumps([verdict_record(v) for v in before]))  # as in fuzz.json
+    ch = changes_against(records, now)
+    assert ch["common_cases"] == 3
+    assert ch["no_longer_failing"] == ["case-0000: collision at 9 s -> passed"]
+    assert ch["newly_failing"] == ["case-0001: passed -> controller failed: cf"]
+    assert ch["goal_reached"] == ["case-0000: no goal -> goal", "case-0002: no goal -> goal"]
+    assert ch["goal_lost"] == ["case-0001: goal -> no goal"]
+    md = report_markdown(now[:3], cases, "OUT", 5, conformance(list(cases.values()), {}), 1.0,
+                         against=("EARLIER", ch),
+                         overrides=[("controller.options.rest_keep_m", 1.0)])
+    assert "## Against EARLIER (3 cases run both times)" in md
+    assert "- failing now: case-0001: passed -> controller failed: cf" in md
+    assert "`--set controller.options.rest_keep_m=1.0`" in md
+
+
+def test_fuzz_names_a_bad_set_and_an_earlier_run_without_verdicts(tmp_path, capsys):
+    out = str(tmp_path / "f")
+    assert main(["fuzz", "--only", "3", "--out", out, "--set", "controller.options.nope=1",
+                 "--quiet"]) != 0
+    err = capsys.readouterr().err
+    assert "fuzz-study.toml" in err and "controller.options.nope" in err
+    old = tmp_path / "old"
+    old.mkdir()
+    (old / "fuzz.json").write_text(json.dumps({"seed": 1, "failures": []}))
+    assert main(["fuzz", "--only", "3", "--out", out, "--against", str(old), "--quiet"]) != 0
+    assert "no per-case verdicts" in capsys.readouterr().err
+    with pytest.raises(SystemExit):  # (argparse's usage error)
+        main(["fuzz", "--only", "3", "--cases", "5", "--out", out])  # one or the other
+    assert "not allowed with argument --only" in capsys.readouterr().err
