@@ -72,8 +72,16 @@ def test_a_plan_that_holds_the_boat_at_rest_is_made_again_from_the_reference(tmp
     summary = run_scenario(scenario, tmp_path, plots=False).summary
     assert summary["elastic"]["restarts"] + summary["elastic"]["back_offs"] >= 1
     assert not check_criteria(scenario, summary)
-    off = with_options(scenario, restart_stuck_s=0.0)
-    summary = run_scenario(off, tmp_path / "off", plots=False).summary
+
+
+@pytest.mark.slow
+def test_a_plan_held_at_rest_and_never_made_again_keeps_the_boat_there(tmp_path):
+    """Its counter-test (slow: the run goes on to its time limit): with no plan made again
+    (`restart_stuck_s` 0), the boat stays held beside the gap and never reaches the goal."""
+    scenario = with_options(load_scenario(
+        REGRESSIONS / "boat_held_at_rest_behind_a_kayak_stopped_across_the_canal.toml"),
+        rest_keep_m=0.0, restart_stuck_s=0.0)
+    summary = run_scenario(scenario, tmp_path, plots=False).summary
     assert not summary["reached_goal"], summary["status"]
 
 
