@@ -26,6 +26,16 @@ def whole_number(minimum: int = 0):
 seed_number = whole_number(0)  # numpy's generators take no negative seeds
 
 
+def assignment(text: str):
+    """The type of `--set`: PATH=VALUE, the value read as TOML (a bare word is a string)."""
+    from scenarios.studies.overrides import parse_assignment
+
+    try:
+        return parse_assignment(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def case_numbers(text: str) -> tuple[int, ...]:
     """The type of an option that takes case numbers: "3,69,129", ranges "0-49", or both
     ("0-9,48"); ascending, each once."""

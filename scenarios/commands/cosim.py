@@ -8,7 +8,7 @@ import json
 import sys
 from pathlib import Path
 
-from scenarios.commands.run import _assignment
+from scenarios.commands.arguments import assignment
 
 
 def _step(text: str) -> float:
@@ -23,7 +23,7 @@ def _step(text: str) -> float:
 
 def _add_scenario_arguments(p) -> None:
     p.add_argument("scenario", help="scenario file (TOML), e.g. scenarios/pohang.toml")
-    p.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", type=_assignment,
+    p.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", type=assignment,
                    help="change a scenario key before it is embedded, as `canalnav run --set` "
                    "(e.g. --set sensors.perception=known-walls); repeatable")
     p.add_argument("--fmi", type=int, choices=(2, 3), default=2,

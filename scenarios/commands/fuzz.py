@@ -9,7 +9,7 @@ JSON; exits 1 when a case failed the rule.
 
 To try a change on the cases that matter: `--only 3,69,129` runs those cases of the seed
 (the same files as in the full run), `--set PATH=VALUE` changes a key of every case (as
-`canalnav run --set`, e.g. `--set controller.rest_keep_m=1.0`), and `--against DIR` lists
+`canalnav run --set`, e.g. `--set controller.options.rest_keep_m=1.0`), and `--against DIR` lists
 the cases whose outcome changed since the run in DIR.
 """
 
@@ -18,7 +18,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from scenarios.commands.arguments import case_numbers, whole_number
+from scenarios.commands.arguments import assignment, case_numbers, whole_number
 
 
 def register(sub) -> None:
@@ -44,18 +44,12 @@ def register(sub) -> None:
     p.add_argument("--min-hull-m", type=float, default=2.0,
                    help="least hull-to-hull distance a case must keep (2 m)")
     p.add_argument("--set", action="append", default=[], metavar="PATH=VALUE",
-                   type=_assignment, help="change a key of every case by its dotted path, as "
-                   "a TOML value (e.g. --set controller.rest_keep_m=1.0); repeatable")
+                   type=assignment, help="change a key of every case by its dotted path, as "
+                   "a TOML value (e.g. --set controller.options.rest_keep_m=1.0); repeatable")
     p.add_argument("--against", metavar="DIR",
                    help="an earlier fuzz's --out: report the cases whose outcome changed")
     add_engine_options(p)
     p.set_defaults(func=run)
-
-
-def _assignment(text: str):
-    from scenarios.commands.run import _assignment as assignment
-
-    return assignment(text)
 
 
 def _earlier_verdicts(folder: str) -> list[dict]:

@@ -8,17 +8,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from scenarios.commands.arguments import seed_number, whole_number
-
-
-def _assignment(text: str):
-    """--set: PATH=VALUE, the value read as TOML (a bare word is a string)."""
-    from scenarios.studies.overrides import parse_assignment
-
-    try:
-        return parse_assignment(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+from scenarios.commands.arguments import assignment, seed_number, whole_number
 
 
 def params_override(path: str) -> tuple[str, str]:
@@ -82,7 +72,7 @@ def register(sub) -> None:
                    "(baseline 1: the NMPC's planner at 1 Hz + LOS-PID), lexicographic "
                    "(baseline 2: the paper's Appendix planner + LOS-PID) or los-pid-waypoints "
                    "(LOS-PID on the waypoints, no planner: blind to walls)")
-    p.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", type=_assignment,
+    p.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", type=assignment,
                    help="change a scenario key by its dotted path, as a TOML value (e.g. "
                    "--set current.east_mps=0.2 --set plant.boat.Nr=-2500); repeatable")
     p.add_argument("--params", metavar="TOML",

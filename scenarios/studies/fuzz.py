@@ -401,18 +401,14 @@ def changes_against(before: list[dict], verdicts: list[Verdict]) -> dict:
     out = {"common_cases": 0, "newly_failing": [], "no_longer_failing": [], "goal_lost": [],
            "goal_reached": []}
 
-    def said(r):
-        return r["why"] or "passed"
-
     for v in sorted(verdicts, key=lambda v: v.case):
         r = old.get(v.case)
         if r is None:
             continue
         out["common_cases"] += 1
-        now = verdict_record(v)
         if r["passed"] != v.passed:
             key = "no_longer_failing" if v.passed else "newly_failing"
-            out[key].append(f"{v.case}: {said(r)} -> {said(now)}")
+            out[key].append(f"{v.case}: {r['why'] or 'passed'} -> {v.why or 'passed'}")
         if r["reached_goal"] != v.reached_goal:
             out["goal_reached" if v.reached_goal else "goal_lost"].append(
                 f"{v.case}: {'goal' if r['reached_goal'] else 'no goal'} -> "
