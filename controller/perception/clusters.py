@@ -605,10 +605,12 @@ def grid_at_numpy(grid: np.ndarray, xy: np.ndarray, r: float, cell: float) -> np
     return grid[i, j].astype(bool)
 
 
-def free_space(found: Clusters, points, margin_m: float) -> np.ndarray:
+def free_space(found: Clusters, points, margin_m: float, spread_bins: int = 0) -> np.ndarray:
     """(K,) bool: the scan saw through each inertial point (K, 2): from one of its
-    viewpoints, the nearest return at its bearing lies more than `margin_m` beyond it, or
-    there is none, and the own hull does not cut the sight line to it. A point just beyond a
+    viewpoints, the nearest return at its bearing (its bin, and with `spread_bins` as many
+    either side: the beams lie farther apart than the bins, so a bin between two beams is
+    empty even on a wall) lies more than `margin_m` beyond it, or there is none, and the own
+    hull does not cut the sight line to it. A point just beyond a
     cluster's end that is free says the end is the object's; one hidden behind a nearer
     return or lying on one (the same surface, out of the crop's band or between the beams'
     rings) says the object may go on there. Seen from the LiDARs themselves (`viewpoints`),
@@ -623,7 +625,12 @@ def free_space(found: Clusters, points, margin_m: float) -> np.ndarray:
         ux, uy = bx - vx, by - vy
         dist = np.hypot(ux, uy)
         bins = bearing_bin(ux, uy)
-        seen = found.occluder_view.nearest(k, bins) > (dist + margin_m) ** 2
+        if spread_bins:
+            aside = (bins + np.arange(-spread_bins, spread_bins + 1)[:, None]) % polar_view.N_BINS
+            nearest = found.occluder_view.nearest(k, aside.ravel()).reshape(aside.shape).min(axis=0)
+        else:
+            nearest = found.occluder_view.nearest(k, bins)
+        seen = nearest > (dist + margin_m) ** 2
         if math.isfinite(vz) and len(found.hull_returns):  # the sight line to the band's top
             seen &= found.hull_view.slope(k, bins) < (found.band_top_m - vz) / np.maximum(
                 dist, 1e-3)

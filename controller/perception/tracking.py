@@ -80,6 +80,7 @@ class TrackerConfig:
     occluder_top_m: float = 3.0  # returns up to this height hide what lies behind them
     free_step_m: float = 1.0  # an end is the object's if the scan saw through this far beyond
     free_margin_m: float = 0.5  # ... it (the nearest return there this much farther, or none)
+    hull_spread_bins: int = 1  # ... for hull evidence, in its bearing bin and this many aside
     # Where the LiDARs sit, (x_m, y_m, height_m above the water) in the body frame: free
     # space is judged from each, the own hull's returns (in detection's hull box) cutting the
     # sight lines they stand in (a bow unit does not see the water behind the cabin). ()
@@ -783,8 +784,13 @@ def _real_ends(found: Clusters, b: int, axes, proj, lo_hi, cfg: TrackerConfig):
     beyond = hull[h] + (sign[j] * cfg.free_step_m)[:, None] * axes[i]
     free = free_space(found, beyond, cfg.free_margin_m)
     hidden = (np.bincount(2 * i + j, ~free, minlength=4) > 0).reshape(2, 2)
-    own = ~(np.bincount(2 * i + j, ~(free | _in_shadow(hull, beyond, found.pose)),
-                        minlength=4) > 0).reshape(2, 2) if hidden.any() else ~hidden
+    # A hull's own end, seen without a return in the bins either side of the water beyond
+    # it: a bin between two beams is empty on a wall seen at a glancing angle too.
+    clear = free.copy()
+    if free.any():
+        clear[free] = free_space(found, beyond[free], cfg.free_margin_m, cfg.hull_spread_bins)
+    own = ~(np.bincount(2 * i + j, ~(clear | _in_shadow(hull, beyond, found.pose)),
+                        minlength=4) > 0).reshape(2, 2)
     faces = found.faces[b] if found.faces else ()
     if len(faces):  # a face the line detector followed on beyond an end: it goes on there
         f = faces.reshape(-1, 2) @ axes.T  # (2f, 2)

@@ -362,6 +362,8 @@ class Verdict:
     fallback_steps: int
     wall_tracks: int
     elastic_steps: int
+    longest_wall_track_s: float = 0.0  # the LiDAR's tracks on a true wall (0: none)
+    most_id_switches: int = 0  # the most track id changes of any one vessel
 
 
 def judge(case: str, row: dict, summary: dict | None, min_hull_m: float = 2.0) -> Verdict:
@@ -384,7 +386,10 @@ def judge(case: str, row: dict, summary: dict | None, min_hull_m: float = 2.0) -
     return Verdict(case, severity == 0, why, severity, bool(s.get("reached_goal")), least,
                    s.get("min_clearance_m"), int(s.get("fallback_steps") or 0),
                    int(tracking.get("wall_tracks") or 0),
-                   int((s.get("elastic") or {}).get("steps") or 0))
+                   int((s.get("elastic") or {}).get("steps") or 0),
+                   float(tracking.get("longest_wall_track_s") or 0.0),
+                   max((int(n) for n in (tracking.get("id_switches") or {}).values()),
+                       default=0))
 
 
 def verdict_record(v: Verdict) -> dict:
@@ -479,15 +484,28 @@ def report_markdown(verdicts: list[Verdict], cases: dict, out_dir: str, seed: in
         sides = ", ".join(f"{s}: {c}" for s, c in sorted(k["passed_on"].items()))
         lines.append(f"| {kind} | {k['encounters']} | {sides} | "
                      f"{k['mean_starboard_half_while_meeting']} |")
+    lidar = [v for v in verdicts if cases[v.case].perception == "lidar"]
+    if lidar:
+        longest = max(lidar, key=lambda v: v.longest_wall_track_s)
+        switches = max(lidar, key=lambda v: v.most_id_switches)
+        lines += ["", "## Tracks that mean boats (LiDAR cases)", "",
+                  f"- {len(lidar)} cases; a track on a wall for more than 1 s in "
+                  f"{sum(v.longest_wall_track_s > 1.0 for v in lidar)}, the longest "
+                  f"{longest.longest_wall_track_s:.1f} s ({longest.case})",
+                  f"- a vessel's track id changed more than once in "
+                  f"{sum(v.most_id_switches > 1 for v in lidar)}, at most "
+                  f"{switches.most_id_switches} times ({switches.case})"]
     lines += ["", "## Every case", "", "| case | passed | goal | least hull m | clearance m |"
-              " fallback steps | wall tracks | elastic steps | kinds | place | perception |",
-              "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+              " fallback steps | wall tracks | longest wall track s | most id switches |"
+              " elastic steps | kinds | place | perception |",
+              "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for v in sorted(verdicts, key=lambda v: v.case):
         c = cases[v.case]
         hull = "" if v.min_hull_m is None else f"{v.min_hull_m:.2f}"
         clear = "" if v.min_clearance_m is None else f"{v.min_clearance_m:.2f}"
         lines.append(f"| {v.case} | {'yes' if v.passed else 'NO'} | "
                      f"{'yes' if v.reached_goal else 'no'} | {hull} | {clear} | "
-                     f"{v.fallback_steps} | {v.wall_tracks} | {v.elastic_steps} | "
+                     f"{v.fallback_steps} | {v.wall_tracks} | {v.longest_wall_track_s:.1f} | "
+                     f"{v.most_id_switches} | {v.elastic_steps} | "
                      f"{', '.join(c.kinds)} | {c.place} | {c.perception} |")
     return "\n".join(lines) + "\n"

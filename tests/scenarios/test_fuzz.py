@@ -61,6 +61,21 @@ def test_the_report_lists_failures_worst_first_with_the_command():
     assert first < second and "`canalnav run OUT/cases/case-0000.toml`" in md
 
 
+def test_the_report_names_the_longest_wall_track_and_the_most_id_switches():
+    """The LiDAR cases' tracking figures (issue 34's bar: no wall track over 1 s, at most one
+    id switch per vessel) are in the report, with the case that has the worst of each."""
+    cases = {c.name: c for c in (generate(5, k, "lidar") for k in range(3))}
+    tracking = [{"wall_tracks": 2, "longest_wall_track_s": 1.6, "id_switches": {"a": 1}},
+                {"wall_tracks": 0, "longest_wall_track_s": 0.0, "id_switches": {"a": 0, "b": 3}},
+                {}]
+    verdicts = [judge(name, ROW, {"tracking": t}) for name, t in zip(cases, tracking)]
+    assert [(v.longest_wall_track_s, v.most_id_switches) for v in verdicts] == [
+        (1.6, 1), (0.0, 3), (0.0, 0)]
+    md = report_markdown(verdicts, cases, "OUT", 5, conformance(list(cases.values()), {}), 1.0)
+    assert "a track on a wall for more than 1 s in 1, the longest 1.6 s (case-0000)" in md
+    assert "changed more than once in 1, at most 3 times (case-0001)" in md
+
+
 @pytest.mark.slow
 def test_fuzz_runs_cases_and_writes_its_report(tmp_path, capsys):
     status = main(["fuzz", "--cases", "2", "--seed", "1", "--out", str(tmp_path / "f"),
