@@ -759,3 +759,48 @@ def test_a_vessel_that_turns_keeps_its_track():
             assert near_ones, t
             ids.update(tr.id for tr in near_ones)
     assert len(ids) == 1, ids
+
+
+def test_a_segment_across_open_water_does_not_join_a_hull_to_what_lies_in_line_with_it():
+    """Hough bridges gaps of several metres at range: a launch's side and a stopped kayak
+    3.8 m beyond its bow, in line, made one segment, and the two one cluster. Where the
+    scan saw water in the gap they stay two; where returns lie in it (one surface), one."""
+    from controller.perception.clusters import find_clusters
+
+    pose = (15.0, 12.0, 0.0)  # on the launch's starboard bow, 14 m off its line
+    launch = box_cloud(outline((21.5, -3.1), 0.0, 6.8, 2.1), pose)[:, :2]
+    kayak = box_cloud(outline((29.4, -1.6), 1.2, 3.5, 0.8), pose)[:, :2]
+    xy = np.concatenate([launch, kayak])
+    through = np.array([[23.9, -2.05, 0.0, 10.0]])  # from the launch's stern to the kayak
+    cfg = TrackerConfig()
+    apart = find_clusters(xy, pose, through, cfg)
+    assert len(apart) == 2 and sorted(apart.size[:, 0].round()) == [4.0, 7.0]
+    boom = box_cloud([(25.3, -2.05), (28.6, -2.05)], pose, spacing=0.05)[:, :2]  # out of band
+    joined = find_clusters(xy, pose, through, cfg, None, np.concatenate([xy, boom]))
+    assert len(joined) == 1
+
+
+def test_a_stopped_kayak_keeps_its_track_while_a_launch_passes_close():
+    """A launch passing 0.4 m off a stopped kayak's end makes one cluster with it. Split
+    between the launch's moving track and the kayak's track at rest, both keep their ids
+    and the kayak its place (a cluster two moving tracks claim was split before; one at rest
+    lost its points to the moving one, and the kayak its track)."""
+    kayak = Vessel("kayak", (25.0, 3.0), math.pi / 2, 0.0, 3.5, 0.8)
+    launch = Vessel("launch", (0.0, -0.2), 0.0, 1.5, 6.8, 2.1)
+    tracker = VesselTracker()
+    ids, kayak_err = {"kayak": set(), "launch": set()}, []
+    for k in range(300):
+        t = 0.1 * k
+        cloud = np.concatenate([box_cloud(v.outline(t), (0.0, 15.0, 0.0))
+                                for v in (kayak, launch)])
+        out = tracker.update(t, cloud, (0.0, 15.0, 0.0), None)
+        if t < 2.0:
+            continue
+        for v in (kayak, launch):
+            tr = track_of(out, v, t, reach_m=1.0)
+            if tr is not None:
+                ids[v.name].add(tr.id)
+        tr = track_of(out, kayak, t, reach_m=1.0)
+        kayak_err.append(math.inf if tr is None else float(np.hypot(*(tr.position - kayak.position(t)))))
+    assert len(ids["kayak"]) == 1 and len(ids["launch"]) == 1, ids
+    assert max(kayak_err) < 1.0
