@@ -47,8 +47,7 @@ class Clusters:
     cluster k; `cut[k]` (h, 2) gives at each corner the direction in which the crop may have
     cut the object off (the range square, the own hull's and the wake's boxes), zero where
     not; whether an end is hidden behind something is `free_space`'s question. `faces[k]`
-    (f, 2, 2): the endpoints of the scan's (non-wall) segments that run through cluster k
-    (or of their pieces, cut where the scan saw water between two clusters on one):
+    (f, 2, 2): the endpoints of the scan's (non-wall) segments that run through cluster k:
     where one reaches beyond an end of the cluster, the face goes on there unseen (the
     returns between the beams' rings, too sparse to join the cluster)."""
 
@@ -242,14 +241,9 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
     grid = cv2.dilate(grid, np.ones((3, 3), np.uint8))
     n_labels, labels = cv2.connectedComponents(grid, connectivity=8)
     # Pieces of one face that the detector's segment runs through are one cluster (a hull
-    # side seen at a glancing angle falls apart between the beams' rings); not where the
-    # scan saw water between them (a launch's side in line with a kayak beyond its bow).
+    # side seen at a glancing angle falls apart between the beams' rings).
     others = segments[~walls]
-    view = Clusters(*_NO_CLUSTERS, walls, xy_body if occluders is None else occluders,
-                    (x0, y0, psi), (), *_viewpoints(cfg, hull_returns))
-    comp, seg, ends = _face_pairs(others, labels, (x0, y0, c, s), cfg,
-                                  lambda p: free_space(view, p, cfg.free_margin_m,
-                                                       cfg.free_spread_bins))
+    comp, seg = _face_pairs(others, labels, (x0, y0, c, s), cfg)
     labels_cv, root = labels, None
     if len(comp) > 1:
         root = np.arange(n_labels)
@@ -263,6 +257,7 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
         root = np.array([_find(root, k) for k in range(n_labels)])
         labels = root[labels]
         comp = root[comp]
+    ends = _endpoints(others)
     face_of: dict = {}
     for k, m in zip(comp.tolist(), seg.tolist()):
         face_of.setdefault(k, set()).add(m)
@@ -331,14 +326,10 @@ def find_clusters(xy_body: np.ndarray, pose, segments: np.ndarray, cfg: "Tracker
     angle = (np.asarray(angle, float) + psi + np.pi / 2) % np.pi - np.pi / 2
     hulls = tuple(h @ rot + origin for h in hulls)
     edges = tuple(e @ rot for e in edges)
-    found = Clusters(centre, angle, np.asarray(from_side, bool),
-                     np.asarray(size, float).reshape(-1, 2), np.asarray(counts, int), hulls,
-                     tuple(edges), walls, view.occluders, view.pose, tuple(faces),
-                     view.viewpoints, view.hull_returns, view.band_top_m, wall_points)
-    for made in ("occluder_view", "hull_view"):  # (the polar images, if the faces asked)
-        if made in view.__dict__:
-            found.__dict__[made] = view.__dict__[made]
-    return found
+    return Clusters(centre, angle, np.asarray(from_side, bool), np.asarray(size, float).reshape(-1, 2),
+                    np.asarray(counts, int), hulls, tuple(edges), walls,
+                    xy_body if occluders is None else occluders, (x0, y0, psi), tuple(faces),
+                    *_viewpoints(cfg, hull_returns), wall_points)
 
 
 def split_by_outlines(points: np.ndarray, outlines: np.ndarray, cfg: "TrackerConfig"):
@@ -533,22 +524,11 @@ def _endpoints(segments: np.ndarray) -> np.ndarray:
     return np.stack([segments[:, :2] - half, segments[:, :2] + half], axis=1)
 
 
-_NO_CLUSTERS = (np.zeros((0, 2)), np.zeros(0), np.zeros(0, bool), np.zeros((0, 2)),
-                np.zeros(0, int), (), ())
-
-
-def _face_pairs(segments: np.ndarray, labels: np.ndarray, frame, cfg: "TrackerConfig",
-                seen=None):
-    """The faces the segments make and the components each runs through: (component,
-    face) index pairs and (F, 2, 2) the faces' endpoints. Each segment sampled every half
-    cell; the components its samples fall in (not the background). With `seen` (inertial
-    points (K, 2) -> (K,) bool, water the scan saw through), a segment is cut where a
-    sample between two components is seen through: the pieces on either side are faces of
-    their own (Hough bridges gaps of several metres at range, between a hull's side and
-    whatever lies in line beyond it); else each segment is one face, its ends its own."""
-    ends = _endpoints(segments)
+def _face_pairs(segments: np.ndarray, labels: np.ndarray, frame, cfg: "TrackerConfig"):
+    """(component, segment) index pairs: each segment sampled every half cell, the
+    components its samples fall in (not the background)."""
     if not len(segments):
-        return np.zeros(0, int), np.zeros(0, int), ends
+        return np.zeros(0, int), np.zeros(0, int)
     x0, y0, c, s = frame
     r = cfg.detection.range_m
     n = labels.shape[0]
@@ -561,50 +541,10 @@ def _face_pairs(segments: np.ndarray, labels: np.ndarray, frame, cfg: "TrackerCo
     i = np.floor((b[:, 0] + r) * (1.0 / cfg.cell_m)).astype(np.intp)
     j = np.floor((b[:, 1] + r) * (1.0 / cfg.cell_m)).astype(np.intp)
     inside = (i >= 0) & (i < n) & (j >= 0) & (j < n)
-    label = np.zeros(len(seg), labels.dtype)
-    label[inside] = labels[i[inside], j[inside]]
-    if seen is not None:
-        seg, ends = _cut_faces(seg, label, pts, ends, seen)
-    m = len(ends)
-    pairs = np.unique(label[label > 0].astype(np.int64) * m + seg[label > 0])
-    return pairs // m, pairs % m, ends
-
-
-def _cut_faces(seg, label, pts, ends, seen):
-    """`_face_pairs`' cut: each sample's face and the faces' endpoints (F, 2, 2), each
-    segment cut at its background samples that lie between two of its samples in
-    components and that `seen` says are open water. The piece before the first cut keeps
-    the segment's index and its start, the one after the last cut its end; a cut face ends
-    at its last sample in a component."""
-    on = label > 0
-    idx = np.arange(len(seg))
-    start = np.searchsorted(seg, seg, "left")
-    stop = np.searchsorted(seg, seg, "right")
-    before = np.maximum.accumulate(np.where(on, idx, -1)) >= start
-    after = np.minimum.accumulate(np.where(on, idx, len(seg))[::-1])[::-1] < stop
-    gap = ~on & before & after
-    if not gap.any():
-        return seg, ends
-    cut = np.zeros(len(seg), bool)
-    cut[gap] = seen(pts[gap])
-    if not cut.any():
-        return seg, ends
-    face, out = seg.copy(), list(ends)
-    for m in np.unique(seg[cut]).tolist():
-        rows = np.flatnonzero(seg == m)
-        piece = np.searchsorted(np.flatnonzero(cut[rows]), np.arange(len(rows)))
-        held = rows[on[rows]]
-        pieces = np.unique(piece[on[rows]])
-        for q, p in enumerate(pieces.tolist()):
-            mine = held[piece[on[rows]] == p]
-            lo = ends[m, 0] if q == 0 else pts[mine[0]]
-            hi = ends[m, 1] if q == len(pieces) - 1 else pts[mine[-1]]
-            if q == 0:
-                out[m] = np.array([lo, hi])
-            else:
-                face[rows[piece == p]] = len(out)
-                out.append(np.array([lo, hi]))
-    return face, np.array(out).reshape(-1, 2, 2)
+    m = len(segments)
+    pairs = np.unique(labels[i[inside], j[inside]] * m + seg[inside])
+    pairs = pairs[pairs >= m]
+    return pairs // m, pairs % m
 
 
 def _on_walls(xy: np.ndarray, walls: np.ndarray, frame, cfg: "TrackerConfig") -> np.ndarray:

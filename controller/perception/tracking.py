@@ -8,8 +8,8 @@ unmatched cluster starts a tentative track, confirmed after `confirm_hits` hits 
 first `confirm_window` scans once it shows a hull (below); a track dies after `max_misses`
 scans or `max_coast_s` unseen, or when it leaves the view; one confirmed where a confirmed
 track died lately takes that one's id (`_reacquire`). Two vessels passing close make one
-cluster: one that two tracks' predicted outlines claim (moving, or at rest and handed on: a
-launch passing a stopped kayak) is split between them (`clusters.split_by_outlines`). A moving track whose vessel turned (a route's corner) has
+cluster: one that two moving tracks' predicted outlines claim is split between them
+(`clusters.split_by_outlines`). A moving track whose vessel turned (a route's corner) has
 its anchored measure fall outside the gate: a cluster that fits inside its outline is taken
 all the same, with the covariance grown (`_manoeuvres`).
 
@@ -80,9 +80,7 @@ class TrackerConfig:
     occluder_top_m: float = 3.0  # returns up to this height hide what lies behind them
     free_step_m: float = 1.0  # an end is the object's if the scan saw through this far beyond
     free_margin_m: float = 0.5  # ... it (the nearest return there this much farther, or none)
-    # Water is seen through, for the hull evidence and a face's gaps, only with no return
-    # in its bearing bin and this many either side (the beams lie ~1.4 bins apart).
-    free_spread_bins: int = 1
+    hull_spread_bins: int = 1  # ... for hull evidence, in its bearing bin and this many aside
     # Where the LiDARs sit, (x_m, y_m, height_m above the water) in the body frame: free
     # space is judged from each, the own hull's returns (in detection's hull box) cutting the
     # sight lines they stand in (a bow unit does not see the water behind the cabin). ()
@@ -462,7 +460,7 @@ class VesselTracker:
         occluders, xy, hull = split_crop(cloud, cfg)
         collect = wall_cells.due(self._cells, t, cfg.wall_cells_every_s)
         found = find_clusters(xy, p, segs, cfg, self._walls, occluders, hull, self._cells,
-                              collect, self._outlines(t))
+                              collect, self._outlines())
         if collect:
             self._cells = wall_cells.remember(self._cells, found.wall_points, t,
                                               cfg.wall_cells_m, cfg.wall_cells_memory_s)
@@ -472,15 +470,12 @@ class VesselTracker:
         self._end_of_life(t, p, scanned=True)
         return self._output(t, segs, len(found), "ok")
 
-    def _outlines(self, t: float) -> np.ndarray:
-        """(T, 5) x, y, axis, length, width of the confirmed tracks handed on (moving, or at
-        rest with a hull seen within `hull_hold_s`), predicted to this scan: a cluster two
-        of them claim is split between them (`find_clusters`), not taken for one vessel the
-        size of both (a launch passing a stopped kayak or a moored boat close)."""
-        hold = self.config.hull_hold_s
+    def _outlines(self) -> np.ndarray:
+        """(T, 5) x, y, axis, length, width of the confirmed moving tracks, predicted to
+        this scan: a cluster two of them claim is split between them (`find_clusters`),
+        not taken for one vessel the size of both."""
         return np.array([(*k.kf.x[:2], k.axis, *k.extent) for k in self._tracks
-                         if not math.isnan(k.confirmed_s)
-                         and (k.moving or not t - k.hull_s > hold)]).reshape(-1, 5)
+                         if k.moving and not math.isnan(k.confirmed_s)]).reshape(-1, 5)
 
     # -- one scan ---------------------------------------------------------------------
     def _associate(self, t: float, found: Clusters, pose) -> None:
@@ -793,7 +788,7 @@ def _real_ends(found: Clusters, b: int, axes, proj, lo_hi, cfg: TrackerConfig):
     # it: a bin between two beams is empty on a wall seen at a glancing angle too.
     clear = free.copy()
     if free.any():
-        clear[free] = free_space(found, beyond[free], cfg.free_margin_m, cfg.free_spread_bins)
+        clear[free] = free_space(found, beyond[free], cfg.free_margin_m, cfg.hull_spread_bins)
     own = ~(np.bincount(2 * i + j, ~(clear | _in_shadow(hull, beyond, found.pose)),
                         minlength=4) > 0).reshape(2, 2)
     faces = found.faces[b] if found.faces else ()
