@@ -203,7 +203,6 @@ def reference_trajectory(path: WaypointPath, position, heading_rad: float, speed
     course on the path: the leg's direction turned into the current by the crab angle
     asin(V_across / u_water), as a helmsman holds a boat on a line across a stream; without
     it, the heading weight would pull the boat off its line to hold the leg's direction.
-    The crab fades out below 0.5 m/s of way (none at rest) and turns the other way astern.
     `offset_m` moves the reference across the path (+ to starboard), as the rules of the road
     ask when meeting or overtaking another vessel (`seamanship`): a number, or a function of
     the arc length (a gap off the path ahead, `passage.Channel`).
@@ -239,13 +238,8 @@ def reference_trajectory(path: WaypointPath, position, heading_rad: float, speed
     if vn or ve:
         across = -vn * np.sin(psi) + ve * np.cos(psi)  # to starboard of the leg
         along = vn * np.cos(psi) + ve * np.sin(psi)
-        water = np.maximum(np.abs(speed - along), 0.5)  # the speed through the water
-        crab = np.arcsin(np.clip(across / water, -0.7, 0.7))  # at most ~45 deg of crab
-        # ... as much as the way the boat makes allows: none at rest (a boat waiting in a
-        # cross current was asked for 44 degrees at zero speed, and the heading weight drove
-        # it ahead into a side canal), and the other way round astern (the water that sets
-        # it to starboard is met by the stern, not the bow).
-        psi = psi - crab * np.clip(speed / 0.5, -1.0, 1.0)
+        water = np.maximum(speed - along, 0.5)  # the boat's speed through the water
+        psi = psi - np.arcsin(np.clip(across / water, -0.7, 0.7))  # at most ~45 deg of crab
     psi = psi + (unwrap_near(psi[0], heading_rad) - psi[0])  # the turn nearest the boat's
     states = np.zeros((horizon + 1, 8))
     states[:, 0:2], states[:, 2] = xy, psi

@@ -124,22 +124,3 @@ def test_a_boat_past_a_blocked_way_stop_is_brought_back_to_it():
     assert near.states[-1, 0] == pytest.approx(40.0, abs=1e-6)  # braked to rest at the stop
     assert near.states[-1, 3] == pytest.approx(0.0, abs=1e-6)
     assert back.progress_m == pytest.approx(42.0)
-
-
-def test_the_crab_angle_holds_the_line_ahead_and_astern_and_is_none_at_rest():
-    """In a cross current the reference heading is turned into it so that the ground track
-    stays on the leg: ahead by asin(across / u_water); astern the other way round (the
-    velocity through the water points aft); at rest none (a heading the boat cannot use
-    to hold a line, and one the heading weight would drive it along)."""
-    path = waypoint_path([(0.0, 0.0), (200.0, 0.0)])
-    current = (0.0, 0.3)  # to starboard of a northward leg
-    ahead = reference_trajectory(path, (50.0, 0.0), 0.0, 1.5, 20, 0.1, current=current)
-    astern = reference_trajectory(path, (70.0, 0.0), 0.0, 1.5, 200, 0.1, stop_at_m=50.0,
-                                  current=current, back_to_stop=True, back_mps=0.5)
-    for ref, k in ((ahead, 1), (astern, int(np.argmin(astern.states[:, 3])))):
-        psi, u = ref.states[k, 2], ref.states[k, 3]
-        ground = u * np.array([math.cos(psi), math.sin(psi)]) + current  # through water + set
-        assert abs(u) > 0.49 and abs(ground[1]) < 1e-9 and ground[0] * u > 0, (u, ground)
-    stop = reference_trajectory(path, (50.0, 0.0), 0.0, 1.0, 40, 0.1, stop_at_m=50.0,
-                                current=current)
-    assert stop.states[-1, 3] == 0.0 and stop.states[-1, 2] == 0.0
