@@ -610,8 +610,8 @@ def free_space(found: Clusters, points, margin_m: float, spread_bins: int = 0) -
     viewpoints, the nearest return at its bearing (its bin, and with `spread_bins` as many
     either side: the beams lie farther apart than the bins, so a bin between two beams is
     empty even on a wall) lies more than `margin_m` beyond it, or there is none, and the own
-    hull does not cut the sight line to it. A point just beyond a
-    cluster's end that is free says the end is the object's; one hidden behind a nearer
+    hull does not cut the sight line to it. A point just beyond a cluster's end that is
+    free says the end is the object's; one hidden behind a nearer
     return or lying on one (the same surface, out of the crop's band or between the beams'
     rings) says the object may go on there. Seen from the LiDARs themselves (`viewpoints`),
     a wall's piece that ends where the cabin cuts a unit's view is not an object's end; seen

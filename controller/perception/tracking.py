@@ -774,7 +774,9 @@ def _real_ends(found: Clusters, b: int, axes, proj, lo_hi, cfg: TrackerConfig):
     segment through the cluster reaches on beyond it. Second, for the hull evidence
     (`_Tracked.hull_hits`): the same, but water beyond a corner in the cluster's own
     shadow (the far end of a hull seen from its quarter) counts as seen through: nothing
-    else hides it, where a piece of wall goes on into the wall or behind a corner."""
+    else hides it, where a piece of wall goes on into the wall or behind a corner; and
+    water is seen through only with no return in the `hull_spread_bins` either side of its
+    bin too (a wall at a glancing angle has its returns farther apart than the bins)."""
     hull, cut = found.hulls[b], found.cut[b]
     sign = np.array([-1.0, 1.0])
     inward = (proj.T[:, None, :] - lo_hi[:, :, None]) * sign[None, :, None]  # (2, 2, h)
