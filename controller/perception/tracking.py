@@ -792,7 +792,7 @@ def _real_ends(found: Clusters, b: int, axes, proj, lo_hi, cfg: TrackerConfig):
     if free.any():
         clear[free] = free_space(found, beyond[free], cfg.free_margin_m, cfg.hull_spread_bins)
     own = ~(np.bincount(2 * i + j, ~(clear | _in_shadow(hull, beyond, found.pose)),
-                        minlength=4) > 0).reshape(2, 2)
+                        minlength=4) > 0).reshape(2, 2) if not clear.all() else ~hidden
     faces = found.faces[b] if found.faces else ()
     if len(faces):  # a face the line detector followed on beyond an end: it goes on there
         f = faces.reshape(-1, 2) @ axes.T  # (2f, 2)

@@ -75,7 +75,7 @@ def run(args) -> int:
     from controller.errors import InputError
     from scenarios.commands.sweep import check_engine_options
     from scenarios.studies.fuzz import (changes_against, conformance, generate, judge,
-                                        report_markdown, verdict_record)
+                                        report_markdown, tracking_bar, verdict_record)
     from scenarios.studies.overrides import toml_value
     from scenarios.studies.sweep import require_dask, run_study
     from scenarios.studies.sweep_spec import parse_study
@@ -141,10 +141,7 @@ def run(args) -> int:
         "fallback_steps": sum(v.fallback_steps for v in verdicts),
         "elastic_steps": sum(v.elastic_steps for v in verdicts),
         "wall_tracks": sum(v.wall_tracks for v in verdicts),
-        "cases_with_a_wall_track_over_1_s": sum(v.longest_wall_track_s > 1.0 for v in verdicts),
-        "longest_wall_track_s": max((v.longest_wall_track_s for v in verdicts), default=0.0),
-        "cases_with_a_vessel_over_1_id_switch": sum(v.most_id_switches > 1 for v in verdicts),
-        "most_id_switches": max((v.most_id_switches for v in verdicts), default=0),
+        **tracking_bar(verdicts),
         "rules": conform, "wall_time_s": round(outcome.wall_s, 1),
         "workers": outcome.workers, "report": str(out / "report.md"),
         "failures": [{"case": v.case, "why": v.why,

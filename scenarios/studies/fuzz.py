@@ -392,6 +392,16 @@ def judge(case: str, row: dict, summary: dict | None, min_hull_m: float = 2.0) -
                        default=0))
 
 
+def tracking_bar(verdicts: list[Verdict]) -> dict:
+    """Issue 34's tracking bar over the cases: how many have a track on a wall for more than
+    1 s or a vessel whose track id changed more than once, and the worst of each."""
+    return {
+        "cases_with_a_wall_track_over_1_s": sum(v.longest_wall_track_s > 1.0 for v in verdicts),
+        "longest_wall_track_s": max((v.longest_wall_track_s for v in verdicts), default=0.0),
+        "cases_with_a_vessel_over_1_id_switch": sum(v.most_id_switches > 1 for v in verdicts),
+        "most_id_switches": max((v.most_id_switches for v in verdicts), default=0)}
+
+
 def verdict_record(v: Verdict) -> dict:
     """What fuzz.json keeps of a verdict, for a later run to compare against (`--against`)."""
     return {"case": v.case, "passed": v.passed, "why": v.why, "reached_goal": v.reached_goal,
@@ -486,15 +496,16 @@ def report_markdown(verdicts: list[Verdict], cases: dict, out_dir: str, seed: in
                      f"{k['mean_starboard_half_while_meeting']} |")
     lidar = [v for v in verdicts if cases[v.case].perception == "lidar"]
     if lidar:
+        bar = tracking_bar(lidar)
         longest = max(lidar, key=lambda v: v.longest_wall_track_s)
         switches = max(lidar, key=lambda v: v.most_id_switches)
         lines += ["", "## Tracks that mean boats (LiDAR cases)", "",
                   f"- {len(lidar)} cases; a track on a wall for more than 1 s in "
-                  f"{sum(v.longest_wall_track_s > 1.0 for v in lidar)}, the longest "
-                  f"{longest.longest_wall_track_s:.1f} s ({longest.case})",
+                  f"{bar['cases_with_a_wall_track_over_1_s']}, the longest "
+                  f"{bar['longest_wall_track_s']:.1f} s ({longest.case})",
                   f"- a vessel's track id changed more than once in "
-                  f"{sum(v.most_id_switches > 1 for v in lidar)}, at most "
-                  f"{switches.most_id_switches} times ({switches.case})"]
+                  f"{bar['cases_with_a_vessel_over_1_id_switch']}, at most "
+                  f"{bar['most_id_switches']} times ({switches.case})"]
     lines += ["", "## Every case", "", "| case | passed | goal | least hull m | clearance m |"
               " fallback steps | wall tracks | longest wall track s | most id switches |"
               " elastic steps | kinds | place | perception |",
