@@ -133,6 +133,7 @@ def test_a_selection_threshold_that_is_not_a_positive_number_is_refused(value):
         sysid.SysidConfig(select_se=value)
 
 
+@pytest.mark.slow  # (two more identifications, 19 s)
 def test_the_selection_threshold_decides_which_optional_terms_stay(logs, result):
     """Each term left out by the default rule was tried from the same core fit: a threshold
     just under the largest trial t value keeps that term; one of 1e6 SE keeps none."""

