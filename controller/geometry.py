@@ -309,14 +309,42 @@ def points_in_polygon(points, ring, boundary_m: float = 1e-9) -> np.ndarray:
 def segments_touch(a1, b1, a2, b2, tol_m: float = 1e-9) -> np.ndarray:
     """(N, M) mask: segment i of (a1, b1) and segment j of (a2, b2) have a point in common
     (a proper crossing, or an end of one within `tol_m` of the other, collinear overlaps
-    included). Unlike `segments_cross`, a path through a wall's vertex counts."""
+    included). Unlike `segments_cross`, a path through a wall's vertex counts. Only pairs
+    whose bounding boxes, grown by `tol_m`, overlap are tested (no other pair can touch):
+    a canal's water outline of a thousand legs is checked in milliseconds, not seconds."""
     a1, b1 = np.asarray(a1, float).reshape(-1, 2), np.asarray(b1, float).reshape(-1, 2)
     a2, b2 = np.asarray(a2, float).reshape(-1, 2), np.asarray(b2, float).reshape(-1, 2)
-    touch = segments_cross(a1, b1, a2, b2)
-    touch |= point_segment_distance(a1, a2, b2) <= tol_m
-    touch |= point_segment_distance(b1, a2, b2) <= tol_m
-    touch |= (point_segment_distance(a2, a1, b1) <= tol_m).T
-    touch |= (point_segment_distance(b2, a1, b1) <= tol_m).T
+    lo1, hi1 = np.minimum(a1, b1) - tol_m, np.maximum(a1, b1) + tol_m
+    lo2, hi2 = np.minimum(a2, b2), np.maximum(a2, b2)
+    near = ((lo1[:, None, 0] <= hi2[None, :, 0]) & (lo2[None, :, 0] <= hi1[:, None, 0])
+            & (lo1[:, None, 1] <= hi2[None, :, 1]) & (lo2[None, :, 1] <= hi1[:, None, 1]))
+    i, j = np.nonzero(near)
+    touch = np.zeros(near.shape, bool)
+    if len(i):
+        touch[i, j] = segment_pairs_touch(a1[i], b1[i], a2[j], b2[j], tol_m)
+    return touch
+
+
+def segment_pairs_touch(a1, b1, a2, b2, tol_m: float = 1e-9) -> np.ndarray:
+    """(K,) mask: segment k of (a1, b1) and segment k of (a2, b2) have a point in common,
+    as `segments_touch` decides it for every pair (its reference is that all-pairs form)."""
+    def cross(o, p, q):
+        return (p[:, 0] - o[:, 0]) * (q[:, 1] - o[:, 1]) - (p[:, 1] - o[:, 1]) * (
+            q[:, 0] - o[:, 0])
+
+    def distance(p, a, b):
+        ab = b - a
+        denom = np.einsum("ij,ij->i", ab, ab)
+        t = np.einsum("ij,ij->i", p - a, ab) / np.where(denom > 0, denom, 1.0)
+        closest = a + np.clip(t, 0.0, 1.0)[:, None] * ab
+        return np.linalg.norm(p - closest, axis=-1)
+
+    touch = ((cross(a2, b2, a1) * cross(a2, b2, b1) < 0)
+             & (cross(a1, b1, a2) * cross(a1, b1, b2) < 0))
+    touch |= distance(a1, a2, b2) <= tol_m
+    touch |= distance(b1, a2, b2) <= tol_m
+    touch |= distance(a2, a1, b1) <= tol_m
+    touch |= distance(b2, a1, b1) <= tol_m
     return touch
 
 

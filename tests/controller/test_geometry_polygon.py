@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from controller.geometry import (points_in_polygon, polygon_area, polyline_self_touch, segments_cross,
+from controller.geometry import (point_segment_distance, points_in_polygon, polygon_area,
+                                 polyline_self_touch, segments_cross,
                                  segments_touch, self_intersection)
 
 SQUARE = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
@@ -58,3 +59,30 @@ def test_polyline_self_touch_finds_a_loop_through_a_vertex():
     square = [[0, 0], [10, 0], [10, 10], [0, 10], [0, 0]]
     assert polyline_self_touch(square, closed=True) is None
     assert polyline_self_touch(square) == (0, 3)
+
+
+def test_segments_touch_pruned_by_boxes_equals_every_pair_tested():
+    """`segments_touch` tests only pairs whose boxes overlap; its reference tests every pair
+    (crossings, and each end against the other segment), on grid points where ends sit on
+    other segments, collinear overlaps and shared vertices abound."""
+    def every_pair(a1, b1, a2, b2, tol):
+        touch = segments_cross(a1, b1, a2, b2)
+        touch |= point_segment_distance(a1, a2, b2) <= tol
+        touch |= point_segment_distance(b1, a2, b2) <= tol
+        touch |= (point_segment_distance(a2, a1, b1) <= tol).T
+        touch |= (point_segment_distance(b2, a1, b1) <= tol).T
+        return touch
+
+    rng = np.random.default_rng(3)
+    hits = 0
+    for k in range(200):
+        n, m = rng.integers(1, 30, 2)
+        grid = k % 2 == 0
+        a1, b1 = (rng.integers(0, 6, (n, 2)).astype(float) if grid
+                  else rng.normal(size=(n, 2)) * 3 for _ in range(2))
+        a2, b2 = (rng.integers(0, 6, (m, 2)).astype(float) for _ in range(2))
+        tol = (1e-9, 0.05, 0.5)[k % 3]
+        touch = segments_touch(a1, b1, a2, b2, tol)
+        assert np.array_equal(touch, every_pair(a1, b1, a2, b2, tol)), k
+        hits += int(touch.sum())
+    assert hits > 1000
