@@ -238,12 +238,34 @@ def test_a_plan_breaking_its_wall_rows_in_a_gap_is_solved_again(tmp_path):
     """Fuzz seed 1 case 252 (known walls): a kayak stopped before a moored boat in a bend,
     9 m left to the inner bank. The plan broke its wall rows by about 0.5 step after step
     and turned the boat into the bank; solved again from the reference once they have
-    broken by more than 0.3 for a second, it takes the gap and reaches the goal."""
+    broken by more than `restart_broken_h` for a second, it takes the gap and reaches the
+    goal."""
     scenario = load_scenario(REGRESSIONS / "kayak_stopped_before_a_moored_boat_in_a_bend.toml")
     summary = run_scenario(scenario, tmp_path, plots=False).summary
     assert summary["elastic"]["restarts"] >= 1
     failed = check_criteria(scenario, summary)
     assert not failed, "; ".join(failed)
+
+
+def test_a_plan_running_past_its_stop_is_solved_again_and_the_boat_waits(tmp_path):
+    """Fuzz seed 1 case 90 (LiDAR): a kayak stopped across the canal past a side canal's
+    mouth, a current setting the boat towards the mouth. The plan kept its tail through the
+    gap beside the kayak, its rows broken by 0.2-0.3 units for 25 s, and drew the boat past
+    its stop and into the mouth's far corner at full throttle. Solved again from the
+    reference once its rows have broken by 0.15 for a second, the boat stops short and
+    waits, 2 m and more from the kayak (150 s of the case: its kayak never moves on)."""
+    scenario = replace(load_scenario(
+        REGRESSIONS / "kayak_stopped_past_a_side_canal_in_a_cross_current.toml"),
+        duration_s=150.0)
+    summary = run_scenario(scenario, tmp_path, plots=False).summary
+    assert not summary["collision"], summary["status"]
+    assert summary["elastic"]["restarts"] >= 1
+    assert summary["time_waiting_s"] > 20.0, summary["time_waiting_s"]
+    failed = check_criteria(scenario, summary)
+    assert not failed, "; ".join(failed)
+    with open(tmp_path / "log.csv") as f:  # stopped short of the kayak (at x = 119 m)
+        ahead = max(float(r["true_x_m"]) for r in csv.DictReader(f))
+    assert ahead < 114.0, ahead
 
 
 @pytest.mark.slow
