@@ -217,19 +217,22 @@ def simplify_polyline(points, tolerance_m: float) -> np.ndarray:
     return pts[keep]
 
 
+def _cross(o, p, q):
+    """The z component of (p - o) x (q - o), over the last axis of 2-vectors (its sign says
+    on which side of o-p the point q lies)."""
+    return (p[..., 0] - o[..., 0]) * (q[..., 1] - o[..., 1]) - (
+        p[..., 1] - o[..., 1]) * (q[..., 0] - o[..., 0])
+
+
 def segments_cross(a1, b1, a2, b2, closed: bool = False) -> np.ndarray:
     """(N, M) mask: segment i of (a1, b1) properly crosses segment j of (a2, b2). `closed`:
     touching counts too (an end on the other segment, a ray through a vertex where two walls
     meet), at the price of collinear segments counting even when apart; `segments_touch`
     is exact, and slower."""
-    def cross(o, p, q):
-        return (p[..., 0] - o[..., 0]) * (q[..., 1] - o[..., 1]) - (
-            p[..., 1] - o[..., 1]) * (q[..., 0] - o[..., 0])
-
     A1, B1 = a1[:, None, :], b1[:, None, :]
     A2, B2 = a2[None, :, :], b2[None, :, :]
-    d1, d2 = cross(A2, B2, A1), cross(A2, B2, B1)
-    d3, d4 = cross(A1, B1, A2), cross(A1, B1, B2)
+    d1, d2 = _cross(A2, B2, A1), _cross(A2, B2, B1)
+    d3, d4 = _cross(A1, B1, A2), _cross(A1, B1, B2)
     if closed:
         return (d1 * d2 <= 0) & (d3 * d4 <= 0)
     return (d1 * d2 < 0) & (d3 * d4 < 0)
@@ -328,10 +331,6 @@ def segments_touch(a1, b1, a2, b2, tol_m: float = 1e-9) -> np.ndarray:
 def segment_pairs_touch(a1, b1, a2, b2, tol_m: float = 1e-9) -> np.ndarray:
     """(K,) mask: segment k of (a1, b1) and segment k of (a2, b2) have a point in common,
     as `segments_touch` decides it for every pair (its reference is that all-pairs form)."""
-    def cross(o, p, q):
-        return (p[:, 0] - o[:, 0]) * (q[:, 1] - o[:, 1]) - (p[:, 1] - o[:, 1]) * (
-            q[:, 0] - o[:, 0])
-
     def distance(p, a, b):
         ab = b - a
         denom = np.einsum("ij,ij->i", ab, ab)
@@ -339,8 +338,8 @@ def segment_pairs_touch(a1, b1, a2, b2, tol_m: float = 1e-9) -> np.ndarray:
         closest = a + np.clip(t, 0.0, 1.0)[:, None] * ab
         return np.linalg.norm(p - closest, axis=-1)
 
-    touch = ((cross(a2, b2, a1) * cross(a2, b2, b1) < 0)
-             & (cross(a1, b1, a2) * cross(a1, b1, b2) < 0))
+    touch = ((_cross(a2, b2, a1) * _cross(a2, b2, b1) < 0)
+             & (_cross(a1, b1, a2) * _cross(a1, b1, b2) < 0))
     touch |= distance(a1, a2, b2) <= tol_m
     touch |= distance(b1, a2, b2) <= tol_m
     touch |= distance(a2, a1, b1) <= tol_m
