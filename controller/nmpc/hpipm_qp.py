@@ -162,11 +162,15 @@ def _load_library(build: HpipmBuild, directory: Path) -> tuple[ctypes.CDLL, bool
                                                          _c_double_p, _c_double_p, ctypes.c_int,
                                                          ctypes.c_int, ctypes.c_double,
                                                          ctypes.c_double, ctypes.c_int,
+                                                         ctypes.c_double, ctypes.c_double,
+                                                         ctypes.c_int, _c_int_p,
                                                          ctypes.c_double, ctypes.c_double]
     lib.nmpc_qp_soft_weights.restype = None
     lib.nmpc_qp_soft_weights.argtypes = [ctypes.c_void_p, _c_double_p, _c_double_p]
     lib.nmpc_qp_slack.restype = ctypes.c_void_p
     lib.nmpc_qp_slack.argtypes = [ctypes.c_void_p]
+    lib.nmpc_qp_bound_slack.restype = ctypes.c_void_p
+    lib.nmpc_qp_bound_slack.argtypes = [ctypes.c_void_p]
     lib.nmpc_qp_bind.restype = None
     lib.nmpc_qp_bind.argtypes = [ctypes.c_void_p] + [_c_double_p] * 14 + [_c_int_p, _c_double_p]
     lib.nmpc_qp_set.restype = None
@@ -187,12 +191,16 @@ class HpipmOcpQp:
     changed for the stages that changed, then `solve()`.
 
     Stage 0 has no state (x_0 is fixed); the state and input bounds act on fixed indices.
+    soft_l1 > 0 makes the general rows soft (`soft_weights`); `soft_bounds` (positions in
+    idxbx) makes those state bounds soft in any case, at soft_bound_l1 per unit plus
+    soft_bound_l2 / 2 per unit squared (`bound_slack`: their upper slacks).
     """
 
     def __init__(self, N: int, nx: int, nu: int, ng: int, idxbx, idxbu, Q, R,
                  mode: str = "speed_abs", iter_max: int = 50, tol: float = 1e-6,
                  mu0: float = 0.0, warm_start: int = 0, build: HpipmBuild | None = None,
-                 soft_l1: float = 0.0, soft_l2: float = 0.0):
+                 soft_l1: float = 0.0, soft_l2: float = 0.0, soft_bounds=(),
+                 soft_bound_l1: float = 0.0, soft_bound_l2: float = 0.0):
         self.build = build or casadi_build()
         self.lib, self.cache_hit, self.compile_s = load_library(self.build)
         self.N, self.nx, self.nu, self.ng = N, nx, nu, ng
@@ -200,10 +208,14 @@ class HpipmOcpQp:
         idxbu = np.ascontiguousarray(idxbu, np.intc)
         Q = np.ascontiguousarray(Q, float).reshape(N + 1, nx)
         R = np.ascontiguousarray(R, float).reshape(N, nu)
+        soft_bounds = np.ascontiguousarray(soft_bounds, np.intc).reshape(-1)
+        if soft_bounds.size and not ((soft_bounds >= 0) & (soft_bounds < len(idxbx))).all():
+            raise ValueError("HPIPM: soft_bounds must be positions in idxbx")
         self._handle = self.lib.nmpc_qp_create(
             N, nx, nu, ng, len(idxbx), idxbx.ctypes.data_as(_c_int_p), len(idxbu),
             idxbu.ctypes.data_as(_c_int_p), _ptr(Q), _ptr(R), MODES[mode], iter_max, tol, mu0,
-            int(warm_start), float(soft_l1), float(soft_l2))
+            int(warm_start), float(soft_l1), float(soft_l2), len(soft_bounds),
+            soft_bounds.ctypes.data_as(_c_int_p), float(soft_bound_l1), float(soft_bound_l2))
         if not self._handle:
             raise MemoryError("HPIPM: could not allocate the QP")
         z = np.zeros
@@ -224,6 +236,12 @@ class HpipmOcpQp:
         address = self.lib.nmpc_qp_slack(self._handle)
         self.slack = (np.ctypeslib.as_array((ctypes.c_double * ((N + 1) * ng)).from_address(
             address)).reshape(N + 1, ng) if address else None)
+        # the soft state bounds' upper slacks, (N+1) x len(soft_bounds), likewise
+        address = self.lib.nmpc_qp_bound_slack(self._handle)
+        n = len(soft_bounds)
+        self.bound_slack = (np.ctypeslib.as_array((ctypes.c_double * ((N + 1) * n))
+                                                  .from_address(address)).reshape(N + 1, n)
+                            if address else None)
 
     def share_arrays(self, other: "HpipmOcpQp") -> None:
         """Read the blocks from `other`'s arrays and write the solution and status into

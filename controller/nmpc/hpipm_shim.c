@@ -11,7 +11,9 @@
  *   lg_k <= C_k x_k <= ug_k on stages 1..N (no input terms), hard, or soft with an exact
  *   penalty: lg_k - sl_k <= C_k x_k, sl_k >= 0, costing soft_l1 * sl + soft_l2 / 2 * sl^2,
  *   so the QP is feasible whatever the rows ask, and its answer is the hard QP's whenever
- *   that one is feasible and soft_l1 exceeds its largest multiplier.
+ *   that one is feasible and soft_l1 exceeds its largest multiplier;
+ *   some state bounds may be soft in every QP, hard rows or not (the surge cap: a plan may
+ *   go faster than the reference allows, at a price), their upper slacks read apart.
  *
  * The blocks are bound once (`nmpc_qp_bind`, numpy arrays that live as long as the QP);
  * `nmpc_qp_set` copies a group of them for a range of stages into HPIPM's QP, so that the
@@ -53,13 +55,14 @@
     X(d_ocp_qp_ipm_get_max_res_eq) X(d_ocp_qp_ipm_get_max_res_ineq)                          \
     X(d_ocp_qp_ipm_get_max_res_comp) X(d_ocp_qp_dim_set_ns) X(d_ocp_qp_set_idxs)               \
     X(d_ocp_qp_set_Zl) X(d_ocp_qp_set_Zu) X(d_ocp_qp_set_zl) X(d_ocp_qp_set_zu)               \
-    X(d_ocp_qp_set_lls) X(d_ocp_qp_set_lus) X(d_ocp_qp_sol_get_sl)
+    X(d_ocp_qp_set_lls) X(d_ocp_qp_set_lus) X(d_ocp_qp_sol_get_sl) X(d_ocp_qp_sol_get_su)
 
 #define DECLARE(name) __typeof__(&name) name;
 static struct { HPIPM_FUNCTIONS(DECLARE) } F;
 static void *blasfeo_handle, *hpipm_handle;
 /* newer HPIPM counts soft general rows apart (nsg); older ones know only ns */
 static void (*set_nsg)(int stage, int value, struct d_ocp_qp_dim *dim);
+static void (*set_nsbx)(int stage, int value, struct d_ocp_qp_dim *dim);
 
 /* Open BLASFEO then HPIPM by path and look the functions up: 0 on success, else the number
  * of the failing step (1, 2: a library; 3: a missing function). */
@@ -74,6 +77,7 @@ int nmpc_qp_load(const char *blasfeo_path, const char *hpipm_path)
 #define LOOKUP(name) if (!(*(void **)&F.name = dlsym(h, #name))) return 3;
     HPIPM_FUNCTIONS(LOOKUP)
     *(void **)&set_nsg = dlsym(h, "d_ocp_qp_dim_set_nsg");
+    *(void **)&set_nsbx = dlsym(h, "d_ocp_qp_dim_set_nsbx");
     hpipm_handle = h;
     return 0;
 }
@@ -81,9 +85,9 @@ int nmpc_qp_load(const char *blasfeo_path, const char *hpipm_path)
 const char *nmpc_qp_load_error(void) { return dlerror(); }
 
 typedef struct {
-    int N, nx, nu, ng, nbx, nbu, ns;
-    int *idxbx, *idxbu, *idxs;
-    double *Zsoft, *zsoft, *zero, *sl;
+    int N, nx, nu, ng, nbx, nbu, ns, nsbx, nsg;
+    int *idxbx, *idxbu, *idxs, *soft_bx;
+    double *Zsoft, *zsoft, *zero, *sl, *su_bx, *slack;
     double *Qdense, *Rdense, *Sdense, *Ddense; /* per stage, built once */
     double *A, *B, *b, *q, *r, *lbx, *ubx, *lbu, *ubu, *C, *lg, *ug, *x, *u, *res;
     int *info;
@@ -102,20 +106,27 @@ void nmpc_qp_free(nmpc_qp *h);
 /* Q: (N+1) x nx diagonals (stage 0 ignored); R: N x nu diagonals. warm_start: HPIPM's (0
  * none, 1 primal, 2 primal and dual from the previous solution). soft_l1 > 0: the general
  * rows are soft (exact penalty soft_l1 per unit, plus soft_l2 / 2 per unit squared); 0: hard.
- * Needs `nmpc_qp_load`. */
+ * soft_bx: nsbx positions in idxbx of state bounds that are soft in any case (stages 1..N),
+ * at soft_bx_l1 and soft_bx_l2 likewise. Needs `nmpc_qp_load`. */
 nmpc_qp *nmpc_qp_create(int N, int nx, int nu, int ng, int nbx, const int *idxbx, int nbu,
                         const int *idxbu, const double *Q, const double *R, int mode,
                         int iter_max, double tol, double mu0, int warm_start, double soft_l1,
-                        double soft_l2)
+                        double soft_l2, int nsbx, const int *soft_bx, double soft_bx_l1,
+                        double soft_bx_l2)
 {
     if (!hpipm_handle) return NULL;
     nmpc_qp *h = calloc(1, sizeof(nmpc_qp));
     if (!h) return NULL;
     h->N = N; h->nx = nx; h->nu = nu; h->ng = ng; h->nbx = nbx; h->nbu = nbu;
-    h->ns = soft_l1 > 0 ? ng : 0;
-    ALLOC(h->idxs, 2 * ng); ALLOC(h->Zsoft, ng); ALLOC(h->zsoft, ng); ALLOC(h->zero, ng);
-    ALLOC(h->sl, (N + 1) * ng);
-    for (int j = 0; j < ng; j++) { h->Zsoft[j] = soft_l2; h->zsoft[j] = soft_l1; }
+    h->nsg = soft_l1 > 0 ? ng : 0;
+    h->nsbx = nsbx;
+    h->ns = h->nsbx + h->nsg;
+    int ns = h->ns;
+    ALLOC(h->idxs, ns); ALLOC(h->Zsoft, ns); ALLOC(h->zsoft, ns); ALLOC(h->zero, ns);
+    ALLOC(h->sl, (N + 1) * ng); ALLOC(h->su_bx, (N + 1) * nsbx); ALLOC(h->slack, ns);
+    ALLOC(h->soft_bx, nsbx); memcpy(h->soft_bx, soft_bx, sizeof(int) * nsbx);
+    for (int j = 0; j < nsbx; j++) { h->Zsoft[j] = soft_bx_l2; h->zsoft[j] = soft_bx_l1; }
+    for (int j = nsbx; j < ns; j++) { h->Zsoft[j] = soft_l2; h->zsoft[j] = soft_l1; }
     ALLOC(h->idxbx, nbx); memcpy(h->idxbx, idxbx, sizeof(int) * nbx);
     ALLOC(h->idxbu, nbu); memcpy(h->idxbu, idxbu, sizeof(int) * nbu);
     ALLOC(h->Qdense, (N + 1) * nx * nx); ALLOC(h->Rdense, N * nu * nu);
@@ -133,8 +144,14 @@ nmpc_qp *nmpc_qp_create(int N, int nx, int nu, int ng, int nbx, const int *idxbx
         F.d_ocp_qp_dim_set_nbx(k, k == 0 ? 0 : nbx, &h->dim);
         F.d_ocp_qp_dim_set_nbu(k, k == N ? 0 : nbu, &h->dim);
         F.d_ocp_qp_dim_set_ng(k, k == 0 ? 0 : ng, &h->dim);
-        if (set_nsg) set_nsg(k, k == 0 ? 0 : h->ns, &h->dim);
-        else F.d_ocp_qp_dim_set_ns(k, k == 0 ? 0 : h->ns, &h->dim);
+        if (set_nsg && set_nsbx) {
+            set_nsbx(k, k == 0 ? 0 : h->nsbx, &h->dim);
+            set_nsg(k, k == 0 ? 0 : h->nsg, &h->dim);
+        } else if (set_nsg && !h->nsbx) {
+            set_nsg(k, k == 0 ? 0 : h->nsg, &h->dim);
+        } else {
+            F.d_ocp_qp_dim_set_ns(k, k == 0 ? 0 : h->ns, &h->dim);
+        }
     }
     h->qp_mem = malloc(F.d_ocp_qp_memsize(&h->dim));
     F.d_ocp_qp_create(&h->dim, &h->qp, h->qp_mem);
@@ -150,9 +167,11 @@ nmpc_qp *nmpc_qp_create(int N, int nx, int nu, int ng, int nbx, const int *idxbx
             F.d_ocp_qp_set_idxbx(k, h->idxbx, &h->qp);
             F.d_ocp_qp_set_D(k, h->Ddense, &h->qp);
         }
-        if (k > 0 && h->ns) { /* soft rows: the general ones, after the bounds */
-            int first = (k < N ? nbu : 0) + nbx;
-            for (int j = 0; j < ng; j++) h->idxs[j] = first + j;
+        if (k > 0 && h->ns) { /* soft: the state bounds named, then the general rows, which
+                                 come after the bounds (input bounds first, then state) */
+            int after_bu = k < N ? nbu : 0;
+            for (int j = 0; j < h->nsbx; j++) h->idxs[j] = after_bu + h->soft_bx[j];
+            for (int j = 0; j < h->nsg; j++) h->idxs[h->nsbx + j] = after_bu + nbx + j;
             F.d_ocp_qp_set_idxs(k, h->idxs, &h->qp);
             F.d_ocp_qp_set_Zl(k, h->Zsoft, &h->qp);
             F.d_ocp_qp_set_Zu(k, h->Zsoft, &h->qp);
@@ -245,8 +264,16 @@ int nmpc_qp_solve(nmpc_qp *h)
     memset(h->x, 0, sizeof(double) * nx);
     for (int k = 1; k <= N; k++) F.d_ocp_qp_sol_get_x(k, &h->sol, h->x + k * nx);
     for (int k = 0; k < N; k++) F.d_ocp_qp_sol_get_u(k, &h->sol, h->u + k * nu);
-    if (h->ns)
-        for (int k = 1; k <= N; k++) F.d_ocp_qp_sol_get_sl(k, &h->sol, h->sl + k * h->ng);
+    for (int k = 1; k <= N && h->ns; k++) {
+        if (h->nsg) {
+            F.d_ocp_qp_sol_get_sl(k, &h->sol, h->slack);
+            memcpy(h->sl + k * h->ng, h->slack + h->nsbx, sizeof(double) * h->nsg);
+        }
+        if (h->nsbx) {
+            F.d_ocp_qp_sol_get_su(k, &h->sol, h->slack);
+            memcpy(h->su_bx + k * h->nsbx, h->slack, sizeof(double) * h->nsbx);
+        }
+    }
     double largest = 0.0;
     int nan = 0;
     for (int i = 0; i < (N + 1) * nx + N * nu; i++) {
@@ -260,13 +287,13 @@ int nmpc_qp_solve(nmpc_qp *h)
     return h->info[0];
 }
 
-/* Per-row weights of the soft rows (ng each: the L1 and L2 penalties of row j at every
- * stage), replacing the uniform ones of `nmpc_qp_create`; nothing for a hard QP. */
+/* Per-row weights of the soft general rows (ng each: the L1 and L2 penalties of row j at
+ * every stage), replacing the uniform ones of `nmpc_qp_create`; nothing for hard rows. */
 void nmpc_qp_soft_weights(nmpc_qp *h, const double *l1, const double *l2)
 {
-    if (!h->ns) return;
-    memcpy(h->zsoft, l1, sizeof(double) * h->ng);
-    memcpy(h->Zsoft, l2, sizeof(double) * h->ng);
+    if (!h->nsg) return;
+    memcpy(h->zsoft + h->nsbx, l1, sizeof(double) * h->ng);
+    memcpy(h->Zsoft + h->nsbx, l2, sizeof(double) * h->ng);
     for (int k = 1; k <= h->N; k++) {
         F.d_ocp_qp_set_Zl(k, h->Zsoft, &h->qp);
         F.d_ocp_qp_set_Zu(k, h->Zsoft, &h->qp);
@@ -279,13 +306,21 @@ void nmpc_qp_soft_weights(nmpc_qp *h, const double *l1, const double *l2)
  * NULL when the rows are hard. */
 const double *nmpc_qp_slack(const nmpc_qp *h)
 {
-    return h->ns ? h->sl : NULL;
+    return h->nsg ? h->sl : NULL;
+}
+
+/* The upper slacks of the soft state bounds of the last solve: (N+1) x nsbx (stage 0
+ * zeros), or NULL when there are none. */
+const double *nmpc_qp_bound_slack(const nmpc_qp *h)
+{
+    return h->nsbx ? h->su_bx : NULL;
 }
 
 void nmpc_qp_free(nmpc_qp *h)
 {
     if (!h) return;
-    void *blocks[] = {h->idxs, h->Zsoft, h->zsoft, h->zero, h->sl, h->idxbx, h->idxbu, h->Qdense, h->Rdense, h->Sdense, h->Ddense,
+    void *blocks[] = {h->idxs, h->Zsoft, h->zsoft, h->zero, h->sl, h->su_bx, h->slack,
+                      h->soft_bx, h->idxbx, h->idxbu, h->Qdense, h->Rdense, h->Sdense, h->Ddense,
                       h->dim_mem, h->qp_mem, h->sol_mem, h->arg_mem, h->ws_mem};
     for (size_t i = 0; i < sizeof(blocks) / sizeof(blocks[0]); i++) free(blocks[i]);
     free(h);

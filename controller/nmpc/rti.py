@@ -106,6 +106,12 @@ class QpStep:
         self.p = np.zeros(linearisation.nnz_in(1))
         self._lin_buf, self._lin, self.pieces = _bind(linearisation, [self.w, self.p])
 
+        # the plan's soft surge ceiling per stage (`problem.surge_cap`), set by the caller
+        # before each solve; only the direct HPIPM path has soft bounds to give it
+        self.surge_soft = False
+        self.surge_cap = np.full(N + 1, options.inf)
+        self._u_at = ocp.states_at[:, 3]
+        self._surge = np.zeros(N + 1)
         if options.solver == "hpipm":
             self._hpipm_lin = compile(ocp.hpipm_linearisation)
             self._first_stage = compile(ocp.first_stage)
@@ -118,6 +124,7 @@ class QpStep:
                               "CasADi's (about 1 ms slower a step)", RuntimeWarning,
                               stacklevel=2)
                 self.options = replace(options, solver="hpipm-casadi")
+                self.surge_soft = False
                 self._init_conic()
         else:
             self._init_conic()
@@ -128,21 +135,26 @@ class QpStep:
 
         ocp, o = self.ocp, self.options
         N, nx, nu, nh = ocp.N, NX, NU, ocp.n_h
-        self.bounded_states = np.array([6, 7, 8])  # nT, nS, slack
+        c = ocp.config
+        # nT, nS, slack; and the surge, a soft ceiling in every QP (`surge_cap`)
+        self.surge_soft = c.surge_margin_mps is not None
+        self.bounded_states = np.array([3, 6, 7, 8] if self.surge_soft else [6, 7, 8])
+        soft = dict(soft_bounds=[0], soft_bound_l1=c.surge_l1,
+                    soft_bound_l2=c.surge_l2) if self.surge_soft else {}
         build = choose_build(o.hpipm_build)
         args = (N, nx, nu, nh, self.bounded_states, np.arange(nu),
                 self.hessian[self.states_at], self.hessian[self.inputs_at], o.hpipm_mode,
                 o.iter_max, o.tol, o.mu0, o.warm_start, build)
-        self.qp = HpipmOcpQp(*args)
+        self.qp = HpipmOcpQp(*args, **soft)
         self.qp.ug[:] = o.inf
         # The elastic QP: the same blocks (it reads the hard QP's arrays) with the obstacle
         # rows soft, solved only where the hard one fails (`_hpipm_result`). Elastic rows
         # cost the IPM about three times the iterations, so they are not the default path;
         # where the hard QP solves, the answer is exactly the hard one.
-        c = ocp.config
         self.elastic_qp = None
         if c.obstacle_rows == "exact-penalty":
-            self.elastic_qp = HpipmOcpQp(*args, soft_l1=c.obstacle_l1, soft_l2=c.obstacle_l2)
+            self.elastic_qp = HpipmOcpQp(*args, soft_l1=c.obstacle_l1, soft_l2=c.obstacle_l2,
+                                         **soft)
             # rows: both circles' segment slots, then their vessel slots; a wall is where
             # it is, another boat's hull is a prediction grown by its uncertainty: where
             # not all can hold, the vessel rows give first (`vessel_l1_share`)
@@ -212,6 +224,13 @@ class QpStep:
         self._hi.take(self._bx_at, out=qp.ubx)
         self._lo.take(self.inputs_at, out=qp.lbu)
         self._hi.take(self.inputs_at, out=qp.ubu)
+        if self.surge_soft:  # (the OCP's own surge bounds are infinite)
+            qp.lbx[:, 0] = -self.options.inf
+            self._set_surge_cap(w)
+
+    def _set_surge_cap(self, w) -> None:
+        w.take(self._u_at, out=self._surge)
+        np.subtract(self.surge_cap, self._surge, out=self.qp.ubx[:, 0])
 
     def _set_gradient(self, w, w_ref) -> None:
         qp = self.qp
@@ -288,6 +307,9 @@ class QpStep:
             self._hl_p[:] = p
             self._cl()
             self.qp.set(SET_CONSTRAINTS, 1)
+        if w_ref is not None and self.surge_soft:  # a new setup: its surge ceiling
+            self._set_surge_cap(w)
+            self.qp.set(SET_BOUNDS, 1)
         self._fs_x0[:] = w[:NX]  # (x_0 leads w)
         w.take(self._u0_at, out=self._fs_u0)
         w.take(self._x1_at, out=self._fs_x1)

@@ -164,6 +164,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
     collided = False
     fallback_steps = 0
     elastic_max, elastic_steps = [0.0, 0.0], 0  # the NMPC's soft obstacle rows (h units)
+    surge_over_max, surge_over_steps = 0.0, 0  # its plans above their surge ceilings
     restarts = 0  # steps the NMPC solved again from the reference (rows broken too far)
     back_offs, was_backing = 0, False  # times it backed off along its path, held at rest
     waiting_before = ""
@@ -236,6 +237,10 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
             backing = bool(decision.stats.get("backing_off", False))
             back_offs += backing and not was_backing
             was_backing = backing
+            over = decision.stats.get("surge_over")
+            if over is not None:
+                surge_over_max = max(surge_over_max, over)
+                surge_over_steps += over > 0.05
             elastic = decision.stats.get("elastic")
             if elastic is not None:
                 elastic_max = [max(a, b) for a, b in zip(elastic_max, elastic)]
@@ -325,6 +330,9 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
         "elastic": {"max_segment_rows": _round(elastic_max[0]),
                     "max_vessel_rows": _round(elastic_max[1]), "steps": elastic_steps,
                     "restarts": restarts, "back_offs": back_offs},
+        # how far the NMPC's plans went above their soft surge ceilings (m/s; the steps
+        # with more than 0.05 over)
+        "surge_over": {"max_mps": _round(surge_over_max), "steps": surge_over_steps},
     }
     episodes = metrics.waiting_episodes(rows_waiting, rows_speed, cfg.control_period_s)
     summary.update({k: _round(v) for k, v in episodes.items()})

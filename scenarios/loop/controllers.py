@@ -118,7 +118,8 @@ class NmpcController:
                    "nmpc_step_s": st.stats.time_total_s, "fed_back": st.stats.fed_back,
                    "set_up_in_preparation": st.stats.set_up_in_preparation,
                    "elastic": (st.stats.elastic_segments, st.stats.elastic_vessels),
-                   "restarted": st.stats.restarted, "backing_off": st.stats.backing_off},
+                   "restarted": st.stats.restarted, "backing_off": st.stats.backing_off,
+                   "surge_over": st.stats.surge_over_mps},
         )
 
     def prepare(self) -> None:

@@ -23,7 +23,7 @@ LOG_COLUMNS = (
        "current_true_n_mps", "current_true_e_mps", "current_est_n_mps", "current_est_e_mps",
        "current_sigma_n_mps", "current_sigma_e_mps", "bias_u_mps2", "bias_v_mps2",
        "bias_r_radps2", "tracks", "rules", "elastic_segments", "elastic_vessels",
-       "current_used_n_mps", "current_used_e_mps")
+       "current_used_n_mps", "current_used_e_mps", "surge_over_mps")
 )
 SEGMENT_COLUMNS = ("time_s", "x_c_m", "y_c_m", "theta_rad", "length_m")
 TRACK_COLUMNS = ("time_s", "id", "x_m", "y_m", "v_north_mps", "v_east_mps", "heading_rad",
@@ -84,6 +84,8 @@ class RunLog:
         row += ["", ""] if elastic is None else [repr(float(v)) for v in elastic]
         used = decision.stats.get("current_used")  # what the controller was given
         row += ["", ""] if used is None else [repr(float(v)) for v in used]
+        over = decision.stats.get("surge_over")  # the plan above its surge ceiling (NMPC)
+        row.append("" if over is None else repr(float(over)))
         self._w.writerow(row)
         for s in np.asarray(segments, float).reshape(-1, 4):
             self._sw.writerow([f"{t:.3f}", *(repr(float(v)) for v in s)])
