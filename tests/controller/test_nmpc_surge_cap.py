@@ -74,6 +74,8 @@ def _two_vessels_run(margin):
                        np.array([47.0, 0.0]), steps=600, speed_mps=2.0, vessels=vessels)
 
 
+@pytest.mark.slow  # two 60 s closed loops (about 20 s): the default tests keep the QP's
+# own check and case 15's regression
 def test_a_boat_backed_off_for_a_vessel_comes_on_at_its_target_not_in_a_sprint():
     """The bench's two vessels: the boat gives way to a launch crossing, backs off from a
     tour boat met 3 m off the middle, and comes on again. Without the ceiling its plan
