@@ -299,6 +299,7 @@ class NmpcController:
         self._x1_xy_at = self.ocp.states_at[1:, :2]
         self._u_at = self.ocp.states_at[:, 3]
         self._surge_over = 0.0
+        self._ceiling = config.surge_margin_mps is not None  # (off: no work a step for it)
         self._xy_buffer = np.zeros((config.horizon + 1, 2))
         u0 = self.ocp.inputs_at[0]
         self._u0_rates = slice(int(u0[0]), int(u0[0]) + 2)
@@ -396,7 +397,7 @@ class NmpcController:
         # else each step brings other inputs (a new scan every period): a setup made now
         # would go unused; linearise with the last step's parameters alone
         p, w_ref = (self._last_p, None) if setup is None else (setup.p, setup.w_ref)
-        if setup is not None:
+        if setup is not None and self._ceiling:
             self._qp.surge_cap[:] = setup.surge_cap
         if self._qp.prepare(guess, p, self._lbw, self._ubw, w_ref):
             self._prepared = _Prepared(elapsed, guess, inputs, setup)
@@ -482,7 +483,7 @@ class NmpcController:
         else:
             setup = self._setup(x, inputs, elapsed, guess, self._buffers[0])
             setup.lbw[self._x0_boat] = setup.ubw[self._x0_boat] = x_init
-            if self.method != "ipopt":
+            if self._ceiling and self.method != "ipopt":
                 self._qp.surge_cap[:] = setup.surge_cap
             if guess is None:
                 guess = self._safe_guess(x_init, setup.reference, setup.slack_ref)
@@ -526,8 +527,9 @@ class NmpcController:
                 fallback, plan = "shifted_plan", self._start_at(guess, x_init)
         self._plan = plan
         self._progress_m = reference.progress_m
-        over = plan[self._u_at[1:]] - setup.surge_cap[1:]
-        self._surge_over = max(float(over.max()), 0.0)
+        if self._ceiling:
+            over = plan[self._u_at[1:]] - setup.surge_cap[1:]
+            self._surge_over = max(float(over.max()), 0.0)
         command = self._command(plan, act)  # what leaves now: the feedback ends here
         wall = time.perf_counter() - t0
         times = wall, time.thread_time() - cpu0
