@@ -112,6 +112,15 @@ class TrackerConfig:
     max_coast_s: float = 1.5  # ... or this long without a hit (scans missing or not)
     # Motion.
     moving_mps: float = 0.3
+    # A track at rest whose ends along one of its axes were last seen `unseen_hold_s` ago
+    # is held at rest along that axis: a velocity of 0 +- `unseen_speed_sigma_mps` measured
+    # at each hit (None: no such prior). A piece of wall seen without its ends shows no
+    # motion along the wall, so a velocity one glitch gave it stayed for good: one drifted
+    # 18 s at 0.3-0.4 m/s along a quay, its position spreading along the quay with it, till
+    # it took a cluster 12.7 m on and became a vessel moving at 0.9 m/s for 27 s. (A boat
+    # alongside, its ends cut off by the own hull's box, keeps what it showed that long.)
+    unseen_speed_sigma_mps: float | None = 0.3
+    unseen_hold_s: float = 3.0
     moving_chi2: float = 13.8  # v' P_vv^-1 v: speed significant given the covariance
     moving_hits: int = 5  # updates in a row passing (failing) the test to turn on (off)
     # Hull evidence: a track is confirmed when moving, or after confirm_hits clusters that
@@ -146,9 +155,10 @@ class TrackerConfig:
                   "max_misses", "moving_hits")
         self._check_viewpoints()
         for f in fields(self):
-            if f.name in ("detection", "viewpoints"):
-                continue
             v = getattr(self, f.name)
+            if f.name in ("detection", "viewpoints") or (
+                    f.name == "unseen_speed_sigma_mps" and v is None):
+                continue
             if f.name in counts:
                 if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
                     raise InputError(f"tracker config: {f.name} must be a whole number >= 1, "
@@ -300,6 +310,7 @@ class _Tracked:
         # a hull; a piece of wall seen through a gap or at a corner goes on into the wall.
         self.hull_hits, self.hull_s = 0, -math.inf  # how many, the last one's time
         self.seen_box = None  # (u, v, lo, hi) of this scan's cluster, for static_segments
+        self.seen_s = [float(time_s)] * 2  # an end last seen along the axis, across it
 
     def predict(self, dt: float, cfg: TrackerConfig) -> None:
         f, q = _transition(round(dt, 6), cfg.accel_sigma_mps2)
@@ -339,6 +350,9 @@ class _Tracked:
         self.kf.x[:2] += shift  # the extent grew: the centre moves, the velocity does not
         self.extent = extent
         self.kf.update(z, R=r)
+        self._note_seen(time_s, observed)
+        if not self.moving and cfg.unseen_speed_sigma_mps is not None:
+            self._hold_unseen(time_s, cfg)
         self.hits += 1
         self.misses = 0
         self.last_hit_s = float(time_s)
@@ -346,6 +360,26 @@ class _Tracked:
         if not self.moving and self.extent[1] > self.extent[0]:  # the long axis is along
             self.axis = float(_half_turn(self.axis + math.pi / 2))
             self.extent = self.extent[::-1].copy()
+
+    def _note_seen(self, time_s: float, observed) -> None:
+        """When an end was last seen along the track's axis and across it (`observed`: the
+        directions this detection measured)."""
+        c, s = math.cos(self.axis), math.sin(self.axis)
+        for row in np.asarray(observed, float).reshape(-1, 2):
+            self.seen_s[0 if abs(row[0] * c + row[1] * s) >= math.sqrt(0.5) else 1] = time_s
+
+    def _hold_unseen(self, time_s: float, cfg: TrackerConfig) -> None:
+        """A velocity of 0 +- `unseen_speed_sigma_mps` measured along each axis of the track
+        not seen for `unseen_hold_s`: what is at rest stays so where it is not seen."""
+        stale = [i for i in (0, 1) if time_s - self.seen_s[i] > cfg.unseen_hold_s]
+        if not stale:
+            return
+        c, s = math.cos(self.axis), math.sin(self.axis)
+        h = np.zeros((len(stale), 4))
+        h[:, 2:] = np.array([[c, s], [-s, c]])[stale]
+        self.kf.x, self.kf.P = kalman_update(
+            self.kf.x, self.kf.P, np.zeros(len(stale)), h,
+            np.eye(len(stale)) * cfg.unseen_speed_sigma_mps ** 2)
 
     def _update_motion(self, observed: np.ndarray, cfg: TrackerConfig) -> None:
         """The moving test, on the velocity along the directions this detection measured;
@@ -801,6 +835,16 @@ def _real_ends(found: Clusters, b: int, axes, proj, lo_hi, cfg: TrackerConfig):
         hidden |= goes_on
         own &= ~goes_on
     return real & ~hidden, real & own
+
+
+def kalman_update(x: np.ndarray, p: np.ndarray, z: np.ndarray, h: np.ndarray, r: np.ndarray):
+    """The Kalman filter's measurement update of mean x and covariance p by z = h x + noise
+    of covariance r (Joseph form, so that p stays symmetric and positive)."""
+    s = h @ p @ h.T + r
+    k = np.linalg.solve(s, h @ p).T
+    x = x + k @ (z - h @ x)
+    a = np.eye(len(x)) - k @ h
+    return x, a @ p @ a.T + k @ r @ k.T
 
 
 def _in_shadow(hull: np.ndarray, points: np.ndarray, pose) -> np.ndarray:
