@@ -33,7 +33,10 @@ Static things (a piece of quay, a pier, a moored boat) are clusters too. They ar
 and `moving` turns on only after `moving_hits` updates in a row in which the speed, along
 the directions the update measured, is above `moving_mps` and significant given the
 covariance (chi-square), and off after as many without; a track that is not moving is an
-obstacle like a wall, and its segments stay in `static_segments`.
+obstacle like a wall, and its segments stay in `static_segments`. Along an axis whose ends
+it has not shown for `unseen_hold_s`, a track at rest is held at rest (a velocity prior of
+0): a piece of quay seen without its ends would otherwise keep for good a speed one glitch
+gave it, its position drifting along the quay until it took some other cluster as itself.
 
 Hull evidence. A piece of quay seen through a side canal's mouth or at a corner makes a
 cluster as well, and the way its visible part grows with the own boat's motion can even look

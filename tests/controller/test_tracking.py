@@ -759,3 +759,70 @@ def test_a_vessel_that_turns_keeps_its_track():
             assert near_ones, t
             ids.update(tr.id for tr in near_ones)
     assert len(ids) == 1, ids
+
+
+# -- a track at rest is held at rest along an axis it has not seen the ends of -----------------
+def _glitched_piece(cfg):
+    """A 4 x 1 m track along x at rest whose one glitch gave it 0.4 m/s along its axis."""
+    from controller.perception.tracking import _Tracked
+
+    k = _Tracked(1, 0.0, (20.0, 5.0), np.eye(2) * 0.01, 0.0, (4.0, 1.0), cfg)
+    k.kf.x[2:] = (0.4, 0.0)
+    k.kf.P[2:, 2:] = np.eye(2) * 0.01
+    return k
+
+
+def _seen_across_only(k, cfg, seconds):
+    """Scans at 10 Hz in which only the track's side (across its axis) is seen: the measure
+    along the axis is the prediction, with no weight (as `_measure` gives it)."""
+    speeds = []
+    for i in range(1, int(round(seconds * RATE_HZ)) + 1):
+        k.predict(1.0 / RATE_HZ, cfg)
+        z = np.array([k.kf.x[0], 5.0])
+        k.update(i / RATE_HZ, z, np.diag([1e6, 0.01]), k.extent, np.zeros(2),
+                 np.array([[0.0, 1.0]]), cfg)
+        speeds.append(float(np.hypot(*k.kf.x[2:])))
+    return np.array(speeds)
+
+
+def test_a_track_at_rest_unseen_along_its_axis_loses_the_speed_a_glitch_gave_it():
+    """Fuzz seed 1 case 38: a quay piece kept for 18 s the velocity one glitch gave it, its
+    position drifting along the quay. Held at rest along the unseen axis after
+    `unseen_hold_s`, it stops; before that it keeps what it showed (a boat alongside, its
+    ends cut off); without the prior, or once moving, nothing changes."""
+    cfg = TrackerConfig()
+    speeds = _seen_across_only(_glitched_piece(cfg), cfg, 10.0)
+    hold = int(cfg.unseen_hold_s * RATE_HZ)
+    assert speeds[hold - 2] > 0.39, speeds[:hold]
+    assert speeds[-1] < 0.05 and speeds[hold + 20] < cfg.moving_mps, speeds[hold:]
+    off = TrackerConfig(unseen_speed_sigma_mps=None)
+    assert _seen_across_only(_glitched_piece(off), off, 10.0)[-1] > 0.39
+    moving = _glitched_piece(cfg)
+    moving.moving = True
+    assert _seen_across_only(moving, cfg, 10.0)[-1] > 0.39
+
+
+def test_the_at_rest_prior_is_a_kalman_update():
+    """`kalman_update` (the velocity prior's update) against filterpy's on a 2-D measure."""
+    from filterpy.kalman import KalmanFilter
+
+    from controller.perception.tracking import kalman_update
+
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        a = rng.normal(size=(4, 4))
+        p = a @ a.T + np.eye(4)
+        x, z = rng.normal(size=4), rng.normal(size=2)
+        h, r = rng.normal(size=(2, 4)), np.diag(rng.uniform(0.1, 1.0, 2))
+        kf = KalmanFilter(dim_x=4, dim_z=2)
+        kf.x, kf.P = x.copy(), p.copy()
+        kf.update(z, R=r, H=h)
+        x2, p2 = kalman_update(x, p, z, h, r)
+        assert np.allclose(x2, kf.x, atol=1e-10) and np.allclose(p2, kf.P, atol=1e-10)
+
+
+def test_a_bad_unseen_hold_is_named():
+    with pytest.raises(InputError, match="unseen_speed_sigma_mps"):
+        TrackerConfig(unseen_speed_sigma_mps=-1.0)
+    with pytest.raises(InputError, match="unseen_hold_s"):
+        TrackerConfig(unseen_hold_s=0.0)
