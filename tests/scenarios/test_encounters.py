@@ -341,3 +341,20 @@ def test_without_the_surge_ceiling_the_plan_races_past_the_kayak(tmp_path):
     summary, fastest, kayak_m = _racing_past_a_kayak(tmp_path)
     assert fastest > 3.0, fastest
     assert kayak_m < 2.0, kayak_m
+
+
+@pytest.mark.slow  # (30 s: a whole fuzz case's run; see LONG_RUNS)
+def test_a_quay_piece_seen_without_its_ends_is_no_vessel(tmp_path):
+    """Fuzz seed 1 case 38 (LiDAR): a quay piece near the range kept the speed one glitch gave
+    it and became a vessel moving along the quay for 27.6 s. Held at rest along its unseen
+    axis, no track sits on a wall for more than a second; the kayak is kept 2 m off. (No
+    counter-run: without the prior the wall track's length depends on the arithmetic path,
+    27.6 s with `canalnav run` here, none under the tests' pinned AVX2 OpenBLAS; the
+    mechanism's own test is `test_a_track_at_rest_unseen_along_its_axis_loses_...`.)"""
+    scenario = load_scenario(
+        REGRESSIONS / "quay_piece_past_moored_boats_seen_without_its_ends.toml")
+    summary = run_scenario(scenario, tmp_path, plots=False).summary
+    assert summary["tracking"]["longest_wall_track_s"] <= 1.0, summary["tracking"]
+    failed = check_criteria(scenario, summary)
+    assert not failed, "; ".join(failed)
+
