@@ -348,9 +348,10 @@ def test_a_quay_piece_seen_without_its_ends_is_no_vessel(tmp_path):
     """Fuzz seed 1 case 38 (LiDAR): a quay piece near the range kept the speed one glitch gave
     it and became a vessel moving along the quay for 27.6 s. Held at rest along its unseen
     axis, no track sits on a wall for more than a second; the kayak is kept 2 m off. (No
-    counter-run: without the prior the wall track's length depends on the arithmetic path,
-    27.6 s with `canalnav run` here, none under the tests' pinned AVX2 OpenBLAS; the
-    mechanism's own test is `test_a_track_at_rest_unseen_along_its_axis_loses_...`.)"""
+    counter-run: the wall track came with the tuned HPIPM's trajectory, 27.6 s before the
+    prior and none after; with casadi's HPIPM, as on CI, the boat goes another way and
+    this run had none before either. The mechanism's own test is
+    `test_a_track_at_rest_unseen_along_its_axis_loses_the_speed_a_glitch_gave_it`.)"""
     scenario = load_scenario(
         REGRESSIONS / "quay_piece_past_moored_boats_seen_without_its_ends.toml")
     summary = run_scenario(scenario, tmp_path, plots=False).summary
