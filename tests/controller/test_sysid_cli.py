@@ -40,6 +40,7 @@ def test_sysid_json_and_toml_from_straight_runs_with_a_heldout(log_dir, tmp_path
     assert "Söding" in out.read_text()
 
 
+@pytest.mark.slow  # (27 s: a whole quick identification; for CI time)
 def test_sysid_table_and_bench_json(log_dir, capsys):
     assert main(["bench", "sysid", "--quick", "--seed", "2"]) == 0
     bench = json.loads(capsys.readouterr().out)
