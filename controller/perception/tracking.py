@@ -377,12 +377,13 @@ class _Tracked:
         stale = [i for i in (0, 1) if time_s - self.seen_s[i] > cfg.unseen_hold_s]
         if not stale:
             return
+        from filterpy.kalman import update  # (the functional update: any measure's size)
+
         c, s = math.cos(self.axis), math.sin(self.axis)
         h = np.zeros((len(stale), 4))
         h[:, 2:] = np.array([[c, s], [-s, c]])[stale]
-        self.kf.x, self.kf.P = kalman_update(
-            self.kf.x, self.kf.P, np.zeros(len(stale)), h,
-            np.eye(len(stale)) * cfg.unseen_speed_sigma_mps ** 2)
+        self.kf.x, self.kf.P = update(self.kf.x, self.kf.P, np.zeros(len(stale)),
+                                      np.eye(len(stale)) * cfg.unseen_speed_sigma_mps ** 2, h)
 
     def _update_motion(self, observed: np.ndarray, cfg: TrackerConfig) -> None:
         """The moving test, on the velocity along the directions this detection measured;
@@ -838,16 +839,6 @@ def _real_ends(found: Clusters, b: int, axes, proj, lo_hi, cfg: TrackerConfig):
         hidden |= goes_on
         own &= ~goes_on
     return real & ~hidden, real & own
-
-
-def kalman_update(x: np.ndarray, p: np.ndarray, z: np.ndarray, h: np.ndarray, r: np.ndarray):
-    """The Kalman filter's measurement update of mean x and covariance p by z = h x + noise
-    of covariance r (Joseph form, so that p stays symmetric and positive)."""
-    s = h @ p @ h.T + r
-    k = np.linalg.solve(s, h @ p).T
-    x = x + k @ (z - h @ x)
-    a = np.eye(len(x)) - k @ h
-    return x, a @ p @ a.T + k @ r @ k.T
 
 
 def _in_shadow(hull: np.ndarray, points: np.ndarray, pose) -> np.ndarray:

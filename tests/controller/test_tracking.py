@@ -802,25 +802,6 @@ def test_a_track_at_rest_unseen_along_its_axis_loses_the_speed_a_glitch_gave_it(
     assert _seen_across_only(moving, cfg, 10.0)[-1] > 0.39
 
 
-def test_the_at_rest_prior_is_a_kalman_update():
-    """`kalman_update` (the velocity prior's update) against filterpy's on a 2-D measure."""
-    from filterpy.kalman import KalmanFilter
-
-    from controller.perception.tracking import kalman_update
-
-    rng = np.random.default_rng(3)
-    for _ in range(20):
-        a = rng.normal(size=(4, 4))
-        p = a @ a.T + np.eye(4)
-        x, z = rng.normal(size=4), rng.normal(size=2)
-        h, r = rng.normal(size=(2, 4)), np.diag(rng.uniform(0.1, 1.0, 2))
-        kf = KalmanFilter(dim_x=4, dim_z=2)
-        kf.x, kf.P = x.copy(), p.copy()
-        kf.update(z, R=r, H=h)
-        x2, p2 = kalman_update(x, p, z, h, r)
-        assert np.allclose(x2, kf.x, atol=1e-10) and np.allclose(p2, kf.P, atol=1e-10)
-
-
 def test_a_bad_unseen_hold_is_named():
     with pytest.raises(InputError, match="unseen_speed_sigma_mps"):
         TrackerConfig(unseen_speed_sigma_mps=-1.0)
