@@ -242,8 +242,8 @@ def _run(system: System, out: Path, duration_s, progress) -> CosimResult:
     def advance(steps: int) -> bool:
         return bool(execution.step(steps))
 
-    rows_t, rows_clear, rows_cmd, rows_xt, rows_width, rows_wait, rows_speed = (
-        [] for _ in range(7))
+    rows_t, rows_clear, rows_cmd, rows_xt, rows_width, rows_wait, rows_speed, rows_xy = (
+        [] for _ in range(8))
     states = []
     status, reached, collided, fallback = "time limit", False, False, 0
     now = np.concatenate([scenario.initial_state, [0.0, 0.0]])  # the boat's outputs at t = 0
@@ -277,6 +277,7 @@ def _run(system: System, out: Path, duration_s, progress) -> CosimResult:
             rows_width.append(width)
             rows_wait.append(code == STATUS_CODES["waiting"])
             rows_speed.append(float(np.hypot(state[3], state[4])))
+            rows_xy.append((float(state[0]), float(state[1])))
             fallback += code == STATUS_CODES["fallback"]
             if not ok or code == STATUS_CODES["failed"]:
                 status = f"controller failed: {_failure_reason(out / NAV_LOG)}"
@@ -312,7 +313,7 @@ def _run(system: System, out: Path, duration_s, progress) -> CosimResult:
                                 R_B_M + scenario.d_p_m, dt),
         "fallback_steps": int(fallback),
     }
-    episodes = metrics.waiting_episodes(rows_wait, rows_speed, dt)
+    episodes = metrics.waiting_episodes(rows_wait, rows_speed, dt, xy=rows_xy)
     summary.update({k: _round(v) for k, v in episodes.items()})
     summary.update(metrics.separation_figures(rows_clear, rows_width, R_B_M + scenario.d_p_m,
                                               dt))

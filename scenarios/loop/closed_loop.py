@@ -151,7 +151,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
     command = np.zeros(2)
     rows_t, rows_clear, rows_cmd, rows_xt, solve_s = [], [], [], [], []
     phases: list[tuple] = []  # NMPC (feedback, preparation, step) seconds, fed back
-    rows_waiting, rows_speed = [], []
+    rows_waiting, rows_speed, rows_xy = [], [], []
     rows_water: list[tuple] = []  # (time, true current N, E, estimated N, E) per step
     field = cfg.current_field
     varying = field is not None and field.varies
@@ -265,6 +265,7 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
             waiting_before = why
             rows_waiting.append(bool(waiting))
             rows_speed.append(float(np.hypot(out.state[3], out.state[4])))
+            rows_xy.append((float(out.state[0]), float(out.state[1])))
             rows_width.append(width)
             rows_t.append(t)
             rows_clear.append(clear)
@@ -334,7 +335,8 @@ def run_closed_loop(plant: Plant, controller: Controller, perception: Perception
         # with more than 0.05 over)
         "surge_over": {"max_mps": _round(surge_over_max), "steps": surge_over_steps},
     }
-    episodes = metrics.waiting_episodes(rows_waiting, rows_speed, cfg.control_period_s)
+    episodes = metrics.waiting_episodes(rows_waiting, rows_speed, cfg.control_period_s,
+                                        xy=rows_xy)
     summary.update({k: _round(v) for k, v in episodes.items()})
     summary["time_blind_s"] = _round(feed.blind_periods * cfg.control_period_s)
     summary["missing_scans"] = feed.missing_scans

@@ -317,9 +317,13 @@ class ObstacleWatch:
 
 
 def waiting_episodes(waiting, speed_mps, dt: float, at_rest_mps: float = 0.05,
-                     approach_mps: float = 0.3) -> dict:
+                     approach_mps: float = 0.3, xy=None) -> dict:
     """How long the controller waited (a stop made for a blocked way or blindness), how long
-    of that the boat was held at rest, and the highest speed while held.
+    of that the boat was held at rest, and the highest speed while held; with the boat's
+    positions `xy` (n, 2), the way it made over the ground while waiting beyond each
+    episode's net displacement (`swing_while_waiting_m`: a boat that brakes to its stop and
+    stems a current there makes none, one that surges to and fro past it the whole of every
+    swing back and the way made again).
 
     Held: from the step the boat comes to rest (below `at_rest_mps`) at its stop point to the
     episode's end. An episode that starts at rest (the obstruction in view at the start) has
@@ -339,11 +343,19 @@ def waiting_episodes(waiting, speed_mps, dt: float, at_rest_mps: float = 0.05,
         rest = np.flatnonzero(v[from_k:] < at_rest_mps)
         if len(rest):
             held[start + from_k + rest[0]:end] = True
-    return {
+    out = {
         "time_waiting_s": float(np.count_nonzero(waiting) * dt),
         "time_held_s": float(np.count_nonzero(held) * dt),
         "max_speed_while_held_mps": float(speed[held].max()) if held.any() else None,
     }
+    if xy is not None:
+        xy = np.asarray(xy, float).reshape(-1, 2)
+        swing = 0.0
+        for start, end in zip(edges[::2], edges[1::2]):
+            run = np.hypot(*np.diff(xy[start:end], axis=0).T).sum()
+            swing += run - np.hypot(*(xy[end - 1] - xy[start]))
+        out["swing_while_waiting_m"] = float(swing)
+    return out
 
 
 def water_estimate(rows: np.ndarray, target_speed_mps: float, within_mps: float = 0.05,

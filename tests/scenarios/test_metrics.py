@@ -229,3 +229,23 @@ def test_a_vessel_keeps_its_track_while_a_second_one_beside_it_is_nearer_at_time
     out = watch.summary()
     assert out["id_switches"] == {"launch": 1}
     assert out["duplicate_tracks"] == 1 and out["longest_duplicate_s"] == pytest.approx(3.0)
+
+
+def test_the_swing_while_waiting_counts_the_way_made_to_and_fro_not_the_approach():
+    """A boat braking to its stop and held there, stemming a current, swings by nothing;
+    one surging to and fro past its stop swings by each way back and the way made again.
+    Steps outside an episode do not count."""
+    from scenarios.results.metrics import waiting_episodes
+
+    waiting = [False] * 3 + [True] * 8 + [False] * 2
+    stemming = [0.35] * len(waiting)  # through the water, against a cross current
+    held = np.tile([100.0, 0.0], (len(waiting), 1))
+    held[:6, 0] = [90.0, 93.0, 95.0, 97.0, 98.5, 99.5]  # the approach, waiting from step 3
+    held[-2:, 0] = [101.0, 102.0]  # going on, after it
+    out = waiting_episodes(waiting, stemming, 0.1, xy=held)
+    assert out["swing_while_waiting_m"] == pytest.approx(0.0)
+    swinging = held.copy()
+    swinging[3:11, 0] = [97.0, 100.0, 102.0, 100.0, 96.0, 98.0, 100.0, 101.0]
+    out = waiting_episodes(waiting, stemming, 0.1, xy=swinging)
+    assert out["swing_while_waiting_m"] == pytest.approx(16.0 - 4.0)
+    assert "swing_while_waiting_m" not in waiting_episodes(waiting, stemming, 0.1)
