@@ -47,6 +47,7 @@ class Criteria:
     min_first_detected_m: float | None = None  # each obstacle first seen at least this far off
     min_time_held_s: float | None = None  # held at rest before a blocked way at least this long
     max_speed_while_held_mps: float | None = None  # and no faster than this while held
+    max_swing_while_waiting_m: float | None = None  # to and fro over the ground while waiting
     min_vessel_distance_m: float | None = None  # hull to hull, to every other vessel
     vessels_passed_on: str | None = None  # each vessel on this side of the boat when closest
     min_starboard_half_while_meeting: float | None = None  # share of the meeting time
@@ -683,6 +684,7 @@ def scenario_from_table(data: dict, source: str = "<string>", path: Path | None 
         min_first_detected_m=crit.number("min_first_detected_m", None, low=0),
         min_time_held_s=crit.number("min_time_held_s", None, low=0),
         max_speed_while_held_mps=crit.number("max_speed_while_held_mps", None, low=0),
+        max_swing_while_waiting_m=crit.number("max_swing_while_waiting_m", None, low=0),
         min_vessel_distance_m=crit.number("min_vessel_distance_m", None, low=0),
         vessels_passed_on=crit.string("vessels_passed_on", None, choices=("port", "starboard")),
         min_starboard_half_while_meeting=crit.number("min_starboard_half_while_meeting", None,

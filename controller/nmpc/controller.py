@@ -21,6 +21,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..errors import InputError, SolverError, finite_number
+from ..geometry import wrap_angle
 from .problem import (NU, NX, NX_BOAT, NmpcConfig, ParamLayout, build_ocp, pack_params,
                       surge_cap)
 from .reference import Reference, WaypointPath, reference_trajectory, waypoint_path
@@ -269,6 +270,7 @@ class NmpcController:
         self._x0_at = self.ocp.states_at[0]
         self._xy_at = self.ocp.states_at[:, :2]
         self._ref_at = self.ocp.states_at[:, :NX_BOAT]
+        self._psi_at = self.ocp.states_at[:, 2]
         self._slack_ref_at = self.ocp.states_at[1:, NX - 1]
         self._top_speed = top_speed_mps(config.boat, config.nT_max)
         self._way = WayAhead(config.min_passage_m, config.stop_short_m, config.stop_decel_mps2,
@@ -297,7 +299,6 @@ class NmpcController:
         # third of the time of index arrays
         assert (self._x0_at[:NX_BOAT] == np.arange(NX_BOAT)).all()
         self._x1_xy_at = self.ocp.states_at[1:, :2]
-        self._u_at = self.ocp.states_at[:, 3]
         self._surge_over = 0.0
         self._ceiling = config.surge_margin_mps is not None  # (off: no work a step for it)
         self._xy_buffer = np.zeros((config.horizon + 1, 2))
@@ -698,10 +699,31 @@ class NmpcController:
         slack_ref = self._slack_reference(reference, speed, guess, x[:2], slots, offset)
         w_ref = buffers.w_ref
         w_ref[self._ref_at] = reference.states
+        if guess is not None and c.heading_full_speed_mps:
+            self._loosen_heading(reference.states, guess, w_ref)
         w_ref[self._slack_ref_at] = slack_ref
         self._surge_cap(reference.states[:, 3], float(x[3]), elapsed, buffers.surge_cap)
         return _Setup(reference, selection, stop, rules, vessel_sel, slack_ref, p, w_ref,
                       buffers.lbw, buffers.ubw, buffers.surge_cap)
+
+    def _loosen_heading(self, reference: np.ndarray, guess: np.ndarray,
+                        w_ref: np.ndarray) -> None:
+        """The heading weight of stages slower than `heading_full_speed_mps` in proportion
+        to their reference speed, by the reference: moved from the plan's heading (the
+        guess's) a fraction a = |u_ref| / full of the way to its own. The QP's gradient in
+        the heading is then a times the full weight's, so at its fixed point the weight is
+        a Q_psi, while the Hessian keeps Q_psi and damps the heading's change from step to
+        step. At rest the position alone holds the boat, at whatever heading stems the
+        current."""
+        speed = np.abs(reference[:, 3])
+        share = speed / self.config.heading_full_speed_mps
+        slow = share < 1.0
+        if not slow.any():
+            return
+        at = self._psi_at[slow]
+        planned = guess[at]
+        wanted = reference[slow, 2]
+        w_ref[at] = planned + share[slow] * wrap_angle(wanted - planned)
 
     def _surge_cap(self, reference_u: np.ndarray, surge_mps: float, elapsed_s: float,
                    out: np.ndarray) -> None:

@@ -80,6 +80,14 @@ class NmpcConfig:
     q_diag: tuple[float, ...] = (1.0, 1.0, 500.0, 10.0, 0.0, 1000.0, 0.0, 0.0)
     r_diag: tuple[float, float] = (1.0, 1.0)  # on [dnT, dnS] in (%/s)^2
     terminal_factor: float | None = None  # Q_T = factor * Q; None means Np, as in the paper
+    # Below this reference speed a stage's heading weight counts in proportion to the speed,
+    # down to 0 at rest (`NmpcController._loosen_heading`); 0 or None: the paper's constant
+    # weight.
+    # At speed the heading keeps the boat's line; at a stop the position is what matters,
+    # and the heading weight, 500 times the position's, held a boat waiting in a cross
+    # current to a heading that cannot stem it, so it surged to and fro past its stop
+    # (fuzz seed 1 case 69, 183 m swung in 280 s of waiting).
+    heading_full_speed_mps: float | None = 1.0
     slack_weight: float = 1e4  # rho, per m^2
     nT_max: float = 100.0  # %
     nS_max: float = 100.0  # %
@@ -213,6 +221,8 @@ class NmpcConfig:
                      "vessel_separation_m", "vessel_lateral_inflation_m", "rest_keep_m"):
             if getattr(self, name) < 0:
                 bad(name, "must not be negative")
+        if self.heading_full_speed_mps is not None and self.heading_full_speed_mps < 0:
+            bad("heading_full_speed_mps", "must be a speed >= 0 (0 or None: a constant weight)")
         if self.surge_margin_mps is not None and self.surge_margin_mps < 0:
             bad("surge_margin_mps", "must be a speed >= 0 (None: no surge ceiling)")
         for name in ("surge_l1", "surge_l2"):

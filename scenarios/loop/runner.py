@@ -279,6 +279,11 @@ def check_criteria(scenario: Scenario, summary: dict) -> list[str]:
     if c.max_speed_while_held_mps is not None and held is not None \
             and held > c.max_speed_while_held_mps:
         failed.append(f"speed while held {held} m/s > {c.max_speed_while_held_mps} m/s")
+    swing = s.get("swing_while_waiting_m")
+    if c.max_swing_while_waiting_m is not None and swing is not None \
+            and swing > c.max_swing_while_waiting_m:
+        failed.append(f"swung {swing} m to and fro while waiting > "
+                      f"{c.max_swing_while_waiting_m} m")
     for v in s.get("vessels", []):
         d = v["min_hull_distance_m"]
         if c.min_vessel_distance_m is not None and (d is None or d < c.min_vessel_distance_m):

@@ -364,6 +364,7 @@ class Verdict:
     elastic_steps: int
     longest_wall_track_s: float = 0.0  # the LiDAR's tracks on a true wall (0: none)
     most_id_switches: int = 0  # the most track id changes of any one vessel
+    swing_while_waiting_m: float = 0.0  # way made to and fro over the ground while waiting
 
 
 def judge(case: str, row: dict, summary: dict | None, min_hull_m: float = 2.0) -> Verdict:
@@ -389,7 +390,8 @@ def judge(case: str, row: dict, summary: dict | None, min_hull_m: float = 2.0) -
                    int((s.get("elastic") or {}).get("steps") or 0),
                    float(tracking.get("longest_wall_track_s") or 0.0),
                    max((int(n) for n in (tracking.get("id_switches") or {}).values()),
-                       default=0))
+                       default=0),
+                   float(s.get("swing_while_waiting_m") or 0.0))
 
 
 def tracking_bar(verdicts: list[Verdict]) -> dict:
@@ -506,10 +508,19 @@ def report_markdown(verdicts: list[Verdict], cases: dict, out_dir: str, seed: in
                   f"- a vessel's track id changed more than once in "
                   f"{bar['cases_with_a_vessel_over_1_id_switch']}, at most "
                   f"{bar['most_id_switches']} times ({switches.case})"]
+    waited = [v for v in verdicts if v.swing_while_waiting_m > 0.0]
+    if waited:
+        most = max(waited, key=lambda v: v.swing_while_waiting_m)
+        lines += ["", "## Waiting", "",
+                  f"- swung to and fro more than 10 m while waiting in "
+                  f"{sum(v.swing_while_waiting_m > 10.0 for v in verdicts)} cases, the most "
+                  f"{most.swing_while_waiting_m:.1f} m ({most.case}); over all cases "
+                  f"{sum(v.swing_while_waiting_m for v in verdicts):.1f} m"]
     lines += ["", "## Every case", "", "| case | passed | goal | least hull m | clearance m |"
               " fallback steps | wall tracks | longest wall track s | most id switches |"
-              " elastic steps | kinds | place | perception |",
-              "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+              " elastic steps | swing while waiting m | kinds | place | perception |",
+              "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+              " --- |"]
     for v in sorted(verdicts, key=lambda v: v.case):
         c = cases[v.case]
         hull = "" if v.min_hull_m is None else f"{v.min_hull_m:.2f}"
@@ -518,5 +529,6 @@ def report_markdown(verdicts: list[Verdict], cases: dict, out_dir: str, seed: in
                      f"{'yes' if v.reached_goal else 'no'} | {hull} | {clear} | "
                      f"{v.fallback_steps} | {v.wall_tracks} | {v.longest_wall_track_s:.1f} | "
                      f"{v.most_id_switches} | {v.elastic_steps} | "
+                     f"{v.swing_while_waiting_m:.1f} | "
                      f"{', '.join(c.kinds)} | {c.place} | {c.perception} |")
     return "\n".join(lines) + "\n"

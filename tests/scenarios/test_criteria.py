@@ -68,6 +68,8 @@ def test_met_criteria_give_no_sentence(scenario):
     (dict(min_time_held_s=20.0), dict(time_held_s=5.0), "held at rest for 5.0 s < 20.0 s"),
     (dict(max_speed_while_held_mps=0.1), dict(max_speed_while_held_mps=0.3),
      "speed while held 0.3 m/s > 0.1 m/s"),
+    (dict(max_swing_while_waiting_m=5.0), dict(swing_while_waiting_m=183.0),
+     "swung 183.0 m to and fro while waiting > 5.0 m"),
     (dict(min_first_detected_m=40.0),
      dict(obstacles=[{"name": "pier", "first_detected_m": 12.5}]),
      "obstacle 'pier' first detected 12.5 m away (< 40.0 m)"),

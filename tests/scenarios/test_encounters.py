@@ -299,6 +299,24 @@ def test_a_plan_running_past_its_stop_is_solved_again_and_the_boat_waits(tmp_pat
     assert ahead < 114.0, ahead
 
 
+@pytest.mark.slow  # (2 x 30 s: a whole fuzz case's run, twice; see LONG_RUNS)
+def test_a_boat_waiting_in_a_cross_current_stems_it_at_its_stop(tmp_path):
+    """Fuzz seed 1 case 69 (known walls): a kayak stopped across the way past a side
+    canal's mouth, a 0.36 m/s current across the canal. With the heading weighed in
+    proportion to the reference speed below 1 m/s, the boat waits at its stop, bows into
+    the current, 2 m and more from the kayak; with the paper's constant weight it surged to
+    and fro past its stop for the whole wait (183 m)."""
+    scenario = load_scenario(REGRESSIONS / "boat_waiting_for_a_kayak_in_a_cross_current.toml")
+    summary = run_scenario(scenario, tmp_path, plots=False).summary
+    assert not summary["collision"], summary["status"]
+    assert summary["time_waiting_s"] > 200.0, summary["time_waiting_s"]
+    failed = check_criteria(scenario, summary)
+    assert not failed, "; ".join(failed)
+    off = with_options(scenario, heading_full_speed_mps=0.0)
+    swung = run_scenario(off, tmp_path / "off", plots=False).summary["swing_while_waiting_m"]
+    assert swung > 100.0, swung
+
+
 @pytest.mark.slow
 def test_restarted_only_past_a_unit_the_boat_runs_into_the_bank(tmp_path):
     """The same run restarting only plans that break their rows by more than 1 unit (the

@@ -76,6 +76,19 @@ def test_the_report_names_the_longest_wall_track_and_the_most_id_switches():
     assert "changed more than once in 1, at most 3 times (case-0001)" in md
 
 
+def test_the_report_names_the_most_swing_while_waiting():
+    """A boat surging to and fro past its stop while it waits shows in the report, with the
+    case that swung most; a case that never waited counts 0."""
+    cases = {c.name: c for c in (generate(5, k) for k in range(3))}
+    summaries = [{"swing_while_waiting_m": 3.2}, {"swing_while_waiting_m": 182.9}, {}]
+    verdicts = [judge(name, ROW, s) for name, s in zip(cases, summaries)]
+    assert [v.swing_while_waiting_m for v in verdicts] == [3.2, 182.9, 0.0]
+    md = report_markdown(verdicts, cases, "OUT", 5, conformance(list(cases.values()), {}), 1.0)
+    assert ("swung to and fro more than 10 m while waiting in 1 cases, the most 182.9 m "
+            "(case-0001); over all cases 186.1 m") in md
+    assert "| 182.9 |" in md
+
+
 @pytest.mark.slow
 def test_fuzz_runs_cases_and_writes_its_report(tmp_path, capsys):
     status = main(["fuzz", "--cases", "2", "--seed", "1", "--out", str(tmp_path / "f"),
