@@ -299,6 +299,7 @@ class NmpcController:
         # third of the time of index arrays
         assert (self._x0_at[:NX_BOAT] == np.arange(NX_BOAT)).all()
         self._x1_xy_at = self.ocp.states_at[1:, :2]
+        self._u_at = self.ocp.states_at[:, 3]
         self._surge_over = 0.0
         self._ceiling = config.surge_margin_mps is not None  # (off: no work a step for it)
         self._xy_buffer = np.zeros((config.horizon + 1, 2))

@@ -303,9 +303,10 @@ def test_a_plan_running_past_its_stop_is_solved_again_and_the_boat_waits(tmp_pat
 def test_a_boat_waiting_in_a_cross_current_stems_it_at_its_stop(tmp_path):
     """Fuzz seed 1 case 69 (known walls): a kayak stopped across the way past a side
     canal's mouth, a 0.36 m/s current across the canal. With the heading weighed in
-    proportion to the reference speed below 1 m/s, the boat waits at its stop, bows into
-    the current, 2 m and more from the kayak; with the paper's constant weight it surged to
-    and fro past its stop for the whole wait (183 m)."""
+    proportion to the reference speed below 1 m/s (the file's `heading_full_speed_mps`), the
+    boat waits at its stop, bows into the current, 2 m and more from the kayak; with the
+    paper's constant weight (the default) it surged to and fro past its stop for the whole
+    wait (183 m)."""
     scenario = load_scenario(REGRESSIONS / "boat_waiting_for_a_kayak_in_a_cross_current.toml")
     summary = run_scenario(scenario, tmp_path, plots=False).summary
     assert not summary["collision"], summary["status"]
