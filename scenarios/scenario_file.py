@@ -418,9 +418,22 @@ def _read_vessel(v: _Table, k: int, duration_s: float, seed: int):
         start = course.number("start_s", 0.0, low=0)
         wander = course.number("wander_degps", 0.0, low=0)
         distance = course.number("distance_m", None, low=0, strict=True)
+        rests = []
+        if course.has("waits"):
+            raw = course.raw("waits")
+            ok = isinstance(raw, list) and all(
+                isinstance(w, list) and len(w) == 2 and all(_is_number(x) for x in w)
+                and w[0] >= 0 and w[1] >= 0 for w in raw)
+            if not ok:
+                raise course.err("waits", f"expected [metres along the course >= 0, seconds "
+                                 f">= 0] pairs, got {raw!r}")
+            if raw and speed <= 0:
+                raise course.err("waits", "a vessel with speed_mps = 0 never reaches a wait")
+            rests = [(float(a), float(b)) for a, b in raw]
         course.done()
         vessel = Vessel.on_course(name, hull, start_xy, heading, speed, duration_s, start,
-                                  wander, seed=seed * 7919 + 11 + k, distance_m=distance)
+                                  wander, seed=seed * 7919 + 11 + k, distance_m=distance,
+                                  waits=rests)
         where, line = course, vessel.poses[:, :2]
     v.done()
     return vessel, where, "waypoints" if route is not None else "x_m", line

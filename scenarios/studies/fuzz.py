@@ -32,6 +32,9 @@ SPEED_MPS = 2.0  # the own boat's target speed (the scenario default)
 BARGE_HALF_BEAM_M = 3.0  # the widest followed barge's (30 m long, beam a fifth of that)
 VESSEL_GAP_M = 1.0  # scripted vessels keep this far apart, and from the quays
 GIVE_WAY_STEP_S, GIVE_WAY_MAX_S = 5.0, 60.0  # a vessel in another's way waits in such steps
+KAYAK_REST_S = (15.0, 60.0)  # a drifting kayak rests mid-canal this long, then goes on
+KAYAK_CLEAR_GAP_M = 8.0  # and ends its drift leaving a gap this wide (the boat passes, in time)
+MOORED_ALLOWANCE_M = 3.5  # a moored boat's beam (up to 3.2 m) and its fenders off the quay
 
 
 @dataclass(frozen=True)
@@ -58,6 +61,8 @@ def generate(seed: int, index: int, perception: str = "mixed") -> Case:
     rng = np.random.default_rng([seed, index])
     for _ in range(50):
         case = _draw(rng, seed, index, perception)
+        if case is None:  # a kayak that would end its drift across the way
+            continue
         try:
             parse_scenario(case.text, f"{case.name}.toml")
         except InputError:
@@ -66,7 +71,9 @@ def generate(seed: int, index: int, perception: str = "mixed") -> Case:
     raise RuntimeError(f"fuzz: no valid case {index} of seed {seed} in 50 draws")
 
 
-def _draw(rng, seed: int, index: int, perception: str) -> Case:
+def _draw(rng, seed: int, index: int, perception: str) -> Case | None:
+    """Case `index` from `rng`, or None where a drifting kayak would end its drift across
+    the way (the case is drawn again)."""
     width = float(np.round(rng.uniform(12.0, 40.0), 1))
     junction = bool(rng.uniform() < 0.4)
     bend_deg = 0.0 if junction else float(np.round(rng.uniform(-45.0, 45.0), 1))
@@ -109,6 +116,8 @@ def _draw(rng, seed: int, index: int, perception: str) -> Case:
     duration = max(duration, (canal.route_length + 20.0) / SPEED_MPS * 1.6 + 30.0)
     vessels, names, kinds, waited = _give_way(vessels, names, kept, duration, index)
     duration += waited
+    if not _kayaks_end_clear(vessels, kinds, canal, moored, duration, index):
+        return None
     lines.insert(0, f"# canalnav fuzz case {index} of seed {seed}: {', '.join(kinds)} at the "
                     f"{place}")
     lines += [f"duration_s = {math.ceil(duration)}", f"seed = {index}", ""]
@@ -155,6 +164,16 @@ class _Canal:
         n0 = np.array([0.0, 1.0])
         n1 = np.array([-math.sin(self.bend), math.cos(self.bend)])
         return [self.corner + offset * (n0 + n1) / (1.0 + float(n0 @ n1))]
+
+    def offset(self, xy) -> float:
+        """How far east of the centre line (to the right of the way north) `xy` lies: from
+        the second leg past the bend, else from the first."""
+        p = np.asarray(xy, float)
+        if not self.junction and self.bend:
+            d = np.array([math.cos(self.bend), math.sin(self.bend)])
+            if float((p - self.corner) @ d) > 0.0:
+                return float((p - self.corner) @ np.array([-d[1], d[0]]))
+        return float(p[1])
 
     def heading(self, s: float) -> float:
         return 0.0 if s <= self.leg or self.junction else self.bend
@@ -260,13 +279,37 @@ def _vessel(kind: str, k: int, canal: _Canal, rng, place: str,
     course = math.degrees(canal.heading(s_meet)) + (90.0 if y < 0 else -90.0) + float(
         rng.uniform(-30.0, 30.0))
     v = float(rng.uniform(0.3, 0.7))
+    distance = max(4.0, w - 6.0)
+    rest_at, rest_s = float(rng.uniform(0.3, 0.7)) * distance, float(rng.uniform(*KAYAK_REST_S))
     lines = ["[[vessel]]", f"name = {toml_value(name)}", "[vessel.hull]", "length_m = 3.5",
              "beam_m = 0.8", "height_m = 0.6", 'shape = "pointed"', "[vessel.course]",
              f"x_m = {p[0]:.2f}", f"y_m = {p[1]:.2f}", f"course_deg = {course:.1f}",
              f"speed_mps = {v:.2f}", f"start_s = {max(0.0, t_meet - 20.0):.1f}",
              f"wander_degps = {float(rng.uniform(0.0, 15.0)):.1f}",
-             f"distance_m = {max(4.0, w - 6.0):.1f}", ""]
-    return "\n".join(lines), t_meet + 90.0
+             f"distance_m = {distance:.1f}", f"waits = [[{rest_at:.1f}, {rest_s:.1f}]]", ""]
+    return "\n".join(lines), t_meet + 90.0 + rest_s
+
+
+def _kayaks_end_clear(vessels: list, kinds: list, canal: "_Canal", moored: bool,
+                      duration: float, seed: int) -> bool:
+    """Every drifting kayak ends its drift (its wandering course run out) leaving a gap of
+    at least `KAYAK_CLEAR_GAP_M` on one side, its hull turned any way and the moored boats
+    counted: a kayak may rest across the way, but one that stopped there for good would
+    block the canal, an obstruction rather than an encounter, and no goal could be reached."""
+    half = canal.width / 2
+    for k, (text, kind) in enumerate(zip(vessels, kinds)):
+        if kind != "drifting":
+            continue
+        table = tomllib.loads(text)["vessel"][0]
+        end = _moved(table, 0.0, duration, seed, k).poses[-1, :2]
+        off = canal.offset(end)
+        reach = 0.5 * math.hypot(table["hull"]["length_m"], table["hull"]["beam_m"])
+        moored_side = -canal.side if moored else 0  # +1: the moored boats are to the east
+        east = half - off - reach - (MOORED_ALLOWANCE_M if moored_side > 0 else 0.0)
+        west = half + off - reach - (MOORED_ALLOWANCE_M if moored_side < 0 else 0.0)
+        if abs(off) < half and max(east, west) < KAYAK_CLEAR_GAP_M:
+            return False
+    return True
 
 
 def _give_way(vessels: list, names: list, kinds: list, duration: float, seed: int):

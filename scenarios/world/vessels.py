@@ -100,17 +100,28 @@ class Vessel:
     @classmethod
     def on_course(cls, name: str, hull: Hull, start_xy, course_rad: float, speed_mps: float,
                   duration_s: float, start_s: float = 0.0, wander_degps: float = 0.0,
-                  seed: int = 0, distance_m: float | None = None) -> "Vessel":
+                  seed: int = 0, distance_m: float | None = None, waits=()) -> "Vessel":
         """From `start_xy` on a course and speed from `start_s` (a wandering course if
-        `wander_degps`), stopping after `distance_m` if given."""
+        `wander_degps`), stopping after `distance_m` if given; `waits` (metres along the
+        course, seconds) are pauses on the way (a kayak resting mid-canal, then going on)."""
         _check_speed(name, speed_mps, start_s)
         times = np.arange(0.0, duration_s + TRACK_STEP_S, TRACK_STEP_S)
         heading = np.full(len(times), float(course_rad))
         if wander_degps:
             heading = heading + _wander(times, wander_degps, seed)
         moving = times >= start_s
+        under_way = times - start_s  # the time spent moving since the start, less the pauses
+        paused = 0.0
+        for at_m, for_s in sorted((float(a), float(b)) for a, b in waits):
+            if speed_mps <= 0.0:
+                break
+            arrive = start_s + at_m / speed_mps + paused
+            resting = (times >= arrive) & (times < arrive + for_s)
+            moving &= ~resting
+            under_way = under_way - np.clip(times - arrive, 0.0, for_s)
+            paused += for_s
         if distance_m is not None:
-            moving &= (times - start_s) * speed_mps < distance_m
+            moving &= under_way * speed_mps < distance_m
         v = np.where(moving, speed_mps, 0.0)
         vel = np.column_stack([v * np.cos(heading), v * np.sin(heading)])
         xy = np.asarray(start_xy, float) + np.vstack(

@@ -33,6 +33,65 @@ def test_every_case_is_a_valid_scenario_and_every_kind_and_place_comes_up():
     assert 12.0 <= min(widths) and max(widths) <= 40.0
 
 
+def test_a_drifting_kayak_rests_mid_canal_then_ends_its_drift_clear_of_the_way():
+    from scenarios.studies.fuzz import KAYAK_CLEAR_GAP_M
+
+    seen = 0
+    for k in range(80):
+        case = generate(1, k)
+        if "drifting" not in case.kinds or case.place != "junction":
+            continue  # (a straight canal along x: the gap is read off y)
+        scenario = parse_scenario(case.text, f"{case.name}.toml")
+        width = case.width_m
+        for vessel in scenario.world.vessels:
+            if not vessel.name.startswith("drifting"):
+                continue
+            seen += 1
+            speed = np.hypot(*vessel.velocities.T)
+            moving = np.flatnonzero(speed > 0)
+            assert (speed[moving[0]:moving[-1]] == 0).sum() * 0.1 >= 15.0  # a rest on the way
+            y = vessel.poses[-1, 1]
+            reach = 0.5 * np.hypot(3.5, 0.8)
+            moored = 3.5 if "moored boat" in case.text else 0.0
+            east = width / 2 - y - reach - (moored if "west before" in case.text else 0.0)
+            west = width / 2 + y - reach - (moored if "east before" in case.text else 0.0)
+            assert max(east, west) >= KAYAK_CLEAR_GAP_M or abs(y) > width / 2, case.name
+    assert seen >= 3
+
+
+def test_a_kayak_that_would_stop_for_good_across_the_way_is_drawn_again():
+    from scenarios.studies.fuzz import _Canal, _kayaks_end_clear
+
+    kayak = """[[vessel]]
+name = "drifting-1"
+[vessel.hull]
+length_m = 3.5
+beam_m = 0.8
+[vessel.course]
+x_m = 148.47
+y_m = -6.80
+course_deg = 114.2
+speed_mps = 0.48
+start_s = 99.1
+wander_degps = 8.8
+distance_m = {d}
+"""
+    barge = """[[vessel]]
+name = "followed-0"
+[vessel.hull]
+length_m = 21.6
+beam_m = 4.3
+[vessel.route]
+waypoints = [[79.55, 0.00], [361.00, 0.00]]
+speed_mps = 0.76
+"""
+    # fuzz seed 1 case 69 before the rests: the kayak stopped for good at (139.4, 0.05)
+    canal = _Canal(17.6, 131.0, 301.0, 0.0, True, -1)
+    kinds = ["followed", "drifting"]
+    assert not _kayaks_end_clear([barge, kayak.format(d=11.6)], kinds, canal, True, 406.0, 69)
+    assert _kayaks_end_clear([barge, kayak.format(d=2.0)], kinds, canal, True, 406.0, 69)
+
+
 def test_perception_can_be_fixed():
     assert {generate(2, k, "known-walls").perception for k in range(10)} == {"known-walls"}
 

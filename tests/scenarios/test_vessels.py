@@ -70,6 +70,31 @@ def test_a_wandering_course_is_seeded_and_stops_after_its_distance():
     assert np.allclose(a.pose_at(2.0)[:2], (0, 0))
 
 
+def test_a_course_pauses_at_its_waits_then_goes_on_to_its_distance():
+    hull = Hull(3.5, 0.8, 0.6, "rectangle")
+    v = Vessel.on_course("k", hull, (0, 0), 0.0, 0.5, 80.0, 5.0, distance_m=10.0,
+                         waits=[(4.0, 20.0)])
+    assert np.allclose(v.pose_at(13.0)[:2], (4, 0), atol=0.06)  # arrived 8 s after the start
+    assert np.allclose(v.pose_at(25.0)[:2], (4, 0), atol=0.06)  # resting for 20 s
+    assert np.allclose(v.velocity_at(25.0), 0)
+    assert np.allclose(v.pose_at(35.0)[:2], (5, 0), atol=0.06)  # on again at 33 s
+    assert np.allclose(v.pose_at(70.0)[:2], (10, 0), atol=0.06)  # and stopped after 10 m
+    plain = Vessel.on_course("k", hull, (0, 0), 0.0, 0.5, 80.0, 5.0, distance_m=10.0)
+    assert np.allclose(plain.pose_at(25.0)[:2], (10, 0), atol=0.06)
+
+
+def test_a_course_wait_is_checked_in_the_file():
+    course = BASE.split("[vessel.route]")[0] + (
+        "\n[vessel.course]\nx_m = 10\ny_m = 0\ncourse_deg = 0\nspeed_mps = 1\n"
+        "distance_m = 20\n")
+    s = parse_scenario(course + "waits = [[5, 10]]\n")
+    assert np.allclose(s.world.vessels[0].pose_at(12.0)[:2], (15, 0), atol=0.06)
+    bad(course + "waits = [[5]]\n", "field 'vessel[0].course.waits'", "pairs")
+    bad(course + "waits = [[-1, 3]]\n", "field 'vessel[0].course.waits'")
+    bad(course.replace("speed_mps = 1", "speed_mps = 0") + "waits = [[5, 10]]\n",
+        "field 'vessel[0].course.waits'", "never reaches")
+
+
 def test_the_lidar_renders_the_vessels_where_they_are_at_each_scan():
     from scenarios.sensors.perception import LidarPerception
 
