@@ -220,6 +220,24 @@ def test_a_vessel_crossing_out_of_a_blind_side_canal_is_given_way_to_in_time(tmp
     assert not failed, "; ".join(failed)
 
 
+@pytest.mark.slow  # (2 x 30 s: a whole fuzz case's run, twice; see LONG_RUNS)
+def test_a_boat_out_of_a_blind_side_canal_while_meeting_is_given_way_to(tmp_path):
+    """Fuzz seed 1 case 48 (LiDAR): a launch met to port at a side canal's mouth, and a boat
+    coming out of the canal unseen. At the blind-opening speed the boat stops in the room it
+    has when it first sees the crossing boat; at 1 m/s (the speed before) it is hit."""
+    path = REGRESSIONS / "launch_out_of_a_blind_side_canal_while_meeting.toml"
+    scenario = load_scenario(path)
+    summary = run_scenario(scenario, tmp_path / "slow", plots=False).summary
+    crossing = [v for v in summary["vessels"] if v["name"] == "crossing-1"][0]
+    assert crossing["min_hull_distance_m"] >= 2.0, crossing
+    failed = check_criteria(scenario, summary)
+    assert not failed, "; ".join(failed)
+    fast = run_scenario(with_options(scenario, blind_speed_mps=1.0), tmp_path / "fast",
+                        plots=False).summary
+    assert [v for v in fast["vessels"] if v["name"] == "crossing-1"][0][
+        "min_hull_distance_m"] < 1.0
+
+
 @pytest.mark.slow  # (24 s: a whole fuzz case's run; see LONG_RUNS)
 def test_a_kayak_stopped_across_a_bend_is_waited_for_without_going_on(tmp_path):
     """Fuzz seed 1 case 102 (known walls): a kayak stopped across the canal just past a
