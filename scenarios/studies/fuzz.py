@@ -5,7 +5,8 @@ Each case is drawn from one seed and written as an ordinary scenario file: a can
 wide, either with a bend of up to 45 degrees or straight with a side canal on one side;
 moored boats along a quay and piers now and then; a current of up to 0.5 m/s; one to three
 vessels, each met, overtaken, followed, crossing (from the side canal, from either side) or
-drifting (a kayak). Every vessel is timed to reach its encounter when the own boat does, at
+drifting (a kayak, resting a while on its way across, and ending its drift clear of the way:
+`_kayaks_end_clear`). Every vessel is timed to reach its encounter when the own boat does, at
 the place where it is hardest: in the bend, at the side canal's mouth, beside a moored boat.
 Scripted vessels give way to nobody, so they are kept apart by construction (`_kept_apart`),
 and one whose hull would come within `VESSEL_GAP_M` of another's sets off later, as a skipper
