@@ -223,8 +223,9 @@ def test_a_vessel_crossing_out_of_a_blind_side_canal_is_given_way_to_in_time(tmp
 @pytest.mark.slow  # (2 x 30 s: a whole fuzz case's run, twice; see LONG_RUNS)
 def test_a_boat_out_of_a_blind_side_canal_while_meeting_is_given_way_to(tmp_path):
     """Fuzz seed 1 case 48 (LiDAR): a launch met to port at a side canal's mouth, and a boat
-    coming out of the canal unseen. At the blind-opening speed the boat stops in the room it
-    has when it first sees the crossing boat; at 1 m/s (the speed before) it is hit."""
+    coming out of the canal unseen. At a blind-opening speed of 0.5 m/s (the file's, opt-in)
+    the boat stops in the room it has when it first sees the crossing boat; at 1 m/s (the
+    default) it is hit."""
     path = REGRESSIONS / "launch_out_of_a_blind_side_canal_while_meeting.toml"
     scenario = load_scenario(path)
     summary = run_scenario(scenario, tmp_path / "slow", plots=False).summary
