@@ -397,17 +397,9 @@ def _read_vessel(v: _Table, k: int, duration_s: float, seed: int):
             raise route.err("waypoints", "repeats a point")
         speed = route.number("speed_mps", required=True, low=0)
         start = route.number("start_s", 0.0, low=0)
-        waits = []
-        if route.has("waits"):
-            raw = route.raw("waits")
-            ok = isinstance(raw, list) and all(
-                isinstance(w, list) and len(w) == 2 and isinstance(w[0], int)
-                and not isinstance(w[0], bool) and 0 < w[0] < len(waypoints)
-                and _is_number(w[1]) and w[1] >= 0 for w in raw)
-            if not ok:
-                raise route.err("waits", f"expected [waypoint index (1..{len(waypoints) - 1}), "
-                                f"seconds >= 0] pairs, got {raw!r}")
-            waits = [(int(a), float(b)) for a, b in raw]
+        waits = [(int(a), float(b)) for a, b in _waits(
+            route, lambda a: isinstance(a, int) and not isinstance(a, bool)
+            and 0 < a < len(waypoints), f"waypoint index (1..{len(waypoints) - 1})")]
         route.done()
         vessel = Vessel.on_route(name, hull, waypoints, speed, duration_s, start, waits)
         where, line = route, waypoints
@@ -418,18 +410,10 @@ def _read_vessel(v: _Table, k: int, duration_s: float, seed: int):
         start = course.number("start_s", 0.0, low=0)
         wander = course.number("wander_degps", 0.0, low=0)
         distance = course.number("distance_m", None, low=0, strict=True)
-        rests = []
-        if course.has("waits"):
-            raw = course.raw("waits")
-            ok = isinstance(raw, list) and all(
-                isinstance(w, list) and len(w) == 2 and all(_is_number(x) for x in w)
-                and w[0] >= 0 and w[1] >= 0 for w in raw)
-            if not ok:
-                raise course.err("waits", f"expected [metres along the course >= 0, seconds "
-                                 f">= 0] pairs, got {raw!r}")
-            if raw and speed <= 0:
-                raise course.err("waits", "a vessel with speed_mps = 0 never reaches a wait")
-            rests = [(float(a), float(b)) for a, b in raw]
+        rests = [(float(a), float(b)) for a, b in _waits(
+            course, lambda a: _is_number(a) and a >= 0, "metres along the course >= 0")]
+        if rests and speed <= 0:
+            raise course.err("waits", "a vessel with speed_mps = 0 never reaches a wait")
         course.done()
         vessel = Vessel.on_course(name, hull, start_xy, heading, speed, duration_s, start,
                                   wander, seed=seed * 7919 + 11 + k, distance_m=distance,
@@ -437,6 +421,19 @@ def _read_vessel(v: _Table, k: int, duration_s: float, seed: int):
         where, line = course, vessel.poses[:, :2]
     v.done()
     return vessel, where, "waypoints" if route is not None else "x_m", line
+
+
+def _waits(t: "_Table", place_ok, place: str) -> list:
+    """A vessel's `waits` ([] when not given): [place, seconds >= 0] pairs, each place
+    checked by `place_ok` and named `place` in the error."""
+    if not t.has("waits"):
+        return []
+    raw = t.raw("waits")
+    if not (isinstance(raw, list) and all(
+            isinstance(w, list) and len(w) == 2 and place_ok(w[0]) and _is_number(w[1])
+            and w[1] >= 0 for w in raw)):
+        raise t.err("waits", f"expected [{place}, seconds >= 0] pairs, got {raw!r}")
+    return raw
 
 
 def _check_vessel(world: CanalWorld, vessel, t: _Table, key: str, line, others) -> None:
