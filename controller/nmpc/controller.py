@@ -682,7 +682,8 @@ class NmpcController:
                                          stop_at, c.stop_decel_mps2, inputs.current, offset,
                                          slow_to, back_to_stop=backing or stop is not None
                                          and stop.blocked_at_m is not None
-                                         and stop_at == stop.at_m)
+                                         and stop_at == stop.at_m,
+                                         heading_along_line=c.heading_along_line)
         planned = reference.states[:, :2] if guess is None else guess[self._xy_at]
         selection = select_checked(segs, x[:2], c.segment_slots, c.segment_range_m, planned)
         slots = self._keep_slots(selection.slots)

@@ -92,6 +92,12 @@ class NmpcConfig:
     # rerun of case 90 (`test_a_plan_running_past_its_stop_...`) held the crab's heading at
     # rest and drifted into the side canal's corner (a collision at 91.9 s; none without).
     heading_full_speed_mps: float | None = None
+    # Where the reference moves across the path along the way (over to a gap beside an
+    # obstruction, over `channel_ramp_m`), its heading is the line's, not the leg's
+    # (`reference_trajectory`): against the leg's heading a slow boat behind a kayak stopped
+    # in its way stayed at rest beside the gap (`test_encounters.py`). False: the leg's, as
+    # before.
+    heading_along_line: bool = True
     slack_weight: float = 1e4  # rho, per m^2
     nT_max: float = 100.0  # %
     nS_max: float = 100.0  # %
@@ -211,13 +217,17 @@ class NmpcConfig:
                 value = tuple(np.asarray(value).reshape(-1).tolist())  # weights as a list
                 object.__setattr__(self, f.name, value)
             values = value if isinstance(value, tuple) else (value,)
-            if f.name in ("boat", "terminal_factor", "colreg", "obstacle_rows") or value is None:
+            if f.name in ("boat", "terminal_factor", "colreg", "obstacle_rows",
+                          "heading_along_line") or value is None:
                 continue
             if any(not isinstance(v, numbers.Real) or isinstance(v, (bool, np.bool_))
                    for v in values):
                 bad(f.name, "expected numbers")
             if any(not math.isfinite(v) for v in values):
                 bad(f.name, "must be finite")
+        for name in ("colreg", "heading_along_line"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                bad(name, "expected true or false")
         if len(self.q_diag) != NX_BOAT:
             bad("q_diag", f"needs {NX_BOAT} weights for [x, y, psi, u, v, r, nT, nS]")
         if len(self.r_diag) != 2:

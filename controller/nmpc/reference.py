@@ -186,7 +186,8 @@ def reference_trajectory(path: WaypointPath, position, heading_rad: float, speed
                          search_ahead_m: float | None = None, stop_at_m: float | None = None,
                          decel_mps2: float = 0.15, current=(0.0, 0.0),
                          offset_m: float = 0.0, slow_to=None,
-                         back_to_stop: bool = False, back_mps: float = 0.5) -> Reference:
+                         back_to_stop: bool = False, back_mps: float = 0.5,
+                         heading_along_line: bool = True) -> Reference:
     """r_0..r_horizon for a boat at `position` with `heading_rad`.
 
     The closest point is searched on arc lengths [progress_m, progress_m + search_ahead_m]
@@ -205,7 +206,9 @@ def reference_trajectory(path: WaypointPath, position, heading_rad: float, speed
     it, the heading weight would pull the boat off its line to hold the leg's direction.
     `offset_m` moves the reference across the path (+ to starboard), as the rules of the road
     ask when meeting or overtaking another vessel (`seamanship`): a number, or a function of
-    the arc length (a gap off the path ahead, `passage.Channel`).
+    the arc length (a gap off the path ahead, `passage.Channel`); where it changes, the
+    heading is turned along the line it draws (with `heading_along_line`): the leg's heading
+    across the ramp over to a gap held a slow boat against the move, at rest behind a kayak.
     `slow_to` (arc length, speed): be down to that speed there, braking at `decel_mps2` (a
     blind opening ahead, `blind_openings`): the reference brakes along the horizon as the
     boat must, not at the speed allowed where it is now (which the NMPC followed with a lag
@@ -234,6 +237,8 @@ def reference_trajectory(path: WaypointPath, position, heading_rad: float, speed
         # of a number costs ten times the comparison)
         xy = xy + np.asarray(offset, float)[..., None] * np.column_stack([-np.sin(psi),
                                                                           np.cos(psi)])
+        if heading_along_line and callable(offset_m):  # the line's slope (1 m central)
+            psi = psi + np.arctan((offset_m(s + 0.5) - offset_m(s - 0.5)) / 1.0)
     vn, ve = float(current[0]), float(current[1])
     if vn or ve:
         across = -vn * np.sin(psi) + ve * np.cos(psi)  # to starboard of the leg

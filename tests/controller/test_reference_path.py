@@ -124,3 +124,25 @@ def test_a_boat_past_a_blocked_way_stop_is_brought_back_to_it():
     assert near.states[-1, 0] == pytest.approx(40.0, abs=1e-6)  # braked to rest at the stop
     assert near.states[-1, 3] == pytest.approx(0.0, abs=1e-6)
     assert back.progress_m == pytest.approx(42.0)
+
+
+def test_a_reference_moving_across_the_path_heads_along_its_line():
+    """An offset that changes along the path (moving over to a gap beside an obstruction)
+    turns the reference heading along the line it draws: with the leg's heading across a
+    ramp, a boat stopped behind a kayak at 0.5 m/s held that heading against the move over
+    and never went round (`drifting_kayak_at_a_junction_while_overtaking`)."""
+    path = waypoint_path([[0.0, 0.0], [200.0, 0.0]])
+
+    def ramp(s):  # 5 m to starboard over 20 m, from 10 m to 30 m along
+        return 5.0 * np.clip((np.asarray(s, float) - 10.0) / 20.0, 0.0, 1.0)
+
+    ref = reference_trajectory(path, [0.0, 0.0], 0.0, 2.0, NP, TS, offset_m=ramp)
+    xy, psi = ref.states[:, :2], ref.states[:, 2]
+    line = np.arctan2(np.gradient(xy[:, 1]), np.gradient(xy[:, 0]))
+    on_ramp = (xy[:, 0] > 11.0) & (xy[:, 0] < 29.0)
+    assert on_ramp.sum() >= 5
+    assert np.allclose(psi[on_ramp], math.atan(0.25))
+    assert np.allclose(psi[on_ramp], line[on_ramp], atol=1e-6)
+    assert np.allclose(psi[xy[:, 0] > 31.0], 0.0)  # along the leg again past the ramp
+    fixed = reference_trajectory(path, [0.0, 0.0], 0.0, 2.0, NP, TS, offset_m=3.0)
+    assert np.allclose(fixed.states[:, 2], 0.0)  # a constant offset: the leg's heading

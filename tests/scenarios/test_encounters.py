@@ -74,52 +74,65 @@ def test_a_plan_breaking_its_rows_far_is_solved_again_from_the_reference(tmp_pat
     assert check_criteria(off, run_scenario(off, tmp_path / "off", plots=False).summary)
 
 
-@pytest.mark.slow  # (33 s: a whole fuzz case's run; see LONG_RUNS)
+HELD_BEHIND_A_KAYAK = REGRESSIONS / "boat_held_at_rest_behind_a_kayak_stopped_across_the_canal.toml"
+HELD_UNTIL_BACKING_OFF = REGRESSIONS / "boat_held_at_rest_until_it_backs_off_from_a_stopped_kayak.toml"
+
+
+@pytest.mark.slow  # (2 x 33 s: a whole fuzz case's run, twice; see LONG_RUNS)
 def test_a_plan_that_holds_the_boat_at_rest_is_made_again_from_the_reference(tmp_path):
     """A kayak stopped across half a narrow canal, the boat come up to it behind a barge
-    (fuzz seed 1 case 47, known walls): the real-time iteration's plan held the boat at rest
-    beside the gap for the rest of the run; planned again from the reference once it had
-    for 5 s (or, where that finds nothing, backed off for a new run at it), the boat goes
-    round and reaches the goal. (With the kayak's sides walls like
-    any others, `rest_keep_m` 0: grown by 1.5 m it leaves no way past, and the boat waits.)"""
-    scenario = with_options(load_scenario(
-        REGRESSIONS / "boat_held_at_rest_behind_a_kayak_stopped_across_the_canal.toml"),
-        rest_keep_m=0.0)
+    (fuzz seed 1 case 47, known walls; its sides walls like any others, `rest_keep_m` 0:
+    grown by 1.5 m they leave no way past, and the boat waits). With the reference's heading
+    along the line over to the gap the boat goes round on its first plans. With the leg's
+    heading (`heading_along_line` false, as before) the real-time iteration's plan held the
+    boat at rest beside the gap; planned again from the reference once it had for 5 s (or,
+    where that finds nothing, backed off for a new run at it), it goes round and reaches
+    the goal."""
+    scenario = with_options(load_scenario(HELD_BEHIND_A_KAYAK), rest_keep_m=0.0)
     summary = run_scenario(scenario, tmp_path, plots=False).summary
-    assert summary["elastic"]["restarts"] + summary["elastic"]["back_offs"] >= 1
+    assert summary["elastic"]["restarts"] + summary["elastic"]["back_offs"] == 0
     assert not check_criteria(scenario, summary)
+    leg = with_options(scenario, heading_along_line=False)
+    summary = run_scenario(leg, tmp_path / "leg", plots=False).summary
+    assert summary["elastic"]["restarts"] + summary["elastic"]["back_offs"] >= 1
+    assert not check_criteria(leg, summary)
 
 
 @pytest.mark.slow
 def test_a_plan_held_at_rest_and_never_made_again_keeps_the_boat_there(tmp_path):
-    """Its counter-test (slow: the run goes on to its time limit): with no plan made again
-    (`restart_stuck_s` 0), the boat stays held beside the gap and never reaches the goal."""
-    scenario = with_options(load_scenario(
-        REGRESSIONS / "boat_held_at_rest_behind_a_kayak_stopped_across_the_canal.toml"),
-        rest_keep_m=0.0, restart_stuck_s=0.0)
+    """Its counter-test (slow: the run goes on to its time limit): with the leg's heading and
+    no plan made again (`restart_stuck_s` 0), the boat stays held beside the gap and never
+    reaches the goal."""
+    scenario = with_options(load_scenario(HELD_BEHIND_A_KAYAK), rest_keep_m=0.0,
+                            heading_along_line=False, restart_stuck_s=0.0)
     summary = run_scenario(scenario, tmp_path, plots=False).summary
     assert not summary["reached_goal"], summary["status"]
 
 
-@pytest.mark.slow  # (28 s: a whole fuzz case's run; see LONG_RUNS)
+@pytest.mark.slow  # (2 x 28 s: a whole fuzz case's run, twice; see LONG_RUNS)
 def test_a_boat_still_held_at_rest_backs_off_and_comes_on_again(tmp_path):
     """A kayak stopped across half a canal past a side canal, the boat come up to 5 m of it
-    following a barge (fuzz seed 1 case 47 as generated on 2026-12-06, known walls): planned
-    again from the reference it stayed at rest to the time limit; backing off 8 m along its
-    path, it swings round the kayak 2 m off and reaches the goal."""
-    scenario = load_scenario(
-        REGRESSIONS / "boat_held_at_rest_until_it_backs_off_from_a_stopped_kayak.toml")
+    following a barge (fuzz seed 1 case 47 as generated on 2026-12-06, known walls). With the
+    reference's heading along the line over to the gap the boat goes round without backing
+    off, 2 m and more from the kayak. With the leg's heading it stayed at rest, planned
+    again from the reference, to the time limit; backing off 8 m along its path, it swings
+    round the kayak 2 m off and reaches the goal."""
+    scenario = load_scenario(HELD_UNTIL_BACKING_OFF)
     summary = run_scenario(scenario, tmp_path, plots=False).summary
-    assert summary["elastic"]["back_offs"] >= 1
+    assert summary["elastic"]["back_offs"] == 0
     assert not check_criteria(scenario, summary)
+    leg = with_options(scenario, heading_along_line=False)
+    summary = run_scenario(leg, tmp_path / "leg", plots=False).summary
+    assert summary["elastic"]["back_offs"] >= 1
+    assert not check_criteria(leg, summary)
 
 
 @pytest.mark.slow
 def test_without_backing_off_the_boat_stays_held(tmp_path):
-    """The same run with `back_off_m` 0: held at rest before the kayak to the time limit."""
-    scenario = with_options(load_scenario(
-        REGRESSIONS / "boat_held_at_rest_until_it_backs_off_from_a_stopped_kayak.toml"),
-        back_off_m=0.0)
+    """The same run with the leg's heading and `back_off_m` 0: held at rest before the kayak
+    to the time limit."""
+    scenario = with_options(load_scenario(HELD_UNTIL_BACKING_OFF), heading_along_line=False,
+                            back_off_m=0.0)
     summary = run_scenario(scenario, tmp_path, plots=False).summary
     assert not summary["reached_goal"], summary["status"]
     assert summary["elastic"]["back_offs"] == 0
