@@ -252,6 +252,25 @@ def test_a_boat_out_of_a_blind_side_canal_while_meeting_is_given_way_to(tmp_path
         "min_hull_distance_m"] < 1.0
 
 
+@pytest.mark.slow  # (2 x 35 s: an encounter's whole run, twice; see LONG_RUNS)
+def test_slowed_for_a_blind_opening_the_boat_still_goes_round_a_kayak_stopped_in_its_way(
+        tmp_path):
+    """The junction encounter (fuzz seed 1 case 24, known walls, its kayak stopped for good
+    in the port half at the side canal's mouth) at a blind-opening speed of 0.5 m/s: the
+    boat came up behind the kayak at 0.1 m/s and, with the leg's heading across the
+    reference's move over to the gap, stayed 10 m short of it to the time limit; with the
+    heading along that line it goes round, 2 m and more off, and reaches the goal."""
+    scenario = with_options(load_scenario(
+        Path(__file__).parent / "encounters" / "drifting_kayak_at_a_junction_while_overtaking.toml"),
+        blind_speed_mps=0.5)
+    summary = run_scenario(scenario, tmp_path, plots=False).summary
+    failed = check_criteria(scenario, summary)
+    assert not failed, "; ".join(failed)
+    leg = with_options(scenario, heading_along_line=False)
+    summary = run_scenario(leg, tmp_path / "leg", plots=False).summary
+    assert not summary["reached_goal"], summary["status"]
+
+
 @pytest.mark.slow  # (24 s: a whole fuzz case's run; see LONG_RUNS)
 def test_a_kayak_stopped_across_a_bend_is_waited_for_without_going_on(tmp_path):
     """Fuzz seed 1 case 102 (known walls): a kayak stopped across the canal just past a
