@@ -179,9 +179,9 @@ class NmpcConfig:
     # first seen (its lane some 10 m ahead, less the bow, its half beam and d_v) is about
     # 3 m: fuzz seed 1 case 48, a boat out of a blind side canal at 1.3 m/s, was met at 0 m
     # with 1.0 and 0.7 and passed 2.7 m off with 0.5. 0.5 is not the default yet: with
-    # casadi's HPIPM it stalled the boat 12 m short of the opening for good in
-    # `drifting_kayak_at_a_junction_while_overtaking` and made case 69's waiting boat swing
-    # 182 m (the slow tests of `test_encounters.py`).
+    # casadi's HPIPM it made case 69's boat, waiting in a cross current, swing 182 m (the
+    # slow tests of `test_encounters.py`; the stall it once caused short of the opening in
+    # `drifting_kayak_at_a_junction_while_overtaking` went with `heading_along_line`).
     blind_speed_mps: float | None = 1.0
     blind_margin_m: float = 15.0
     blind_depth_m: float = 25.0
