@@ -83,7 +83,7 @@ class TrackerConfig:
     occluder_top_m: float = 3.0  # returns up to this height hide what lies behind them
     free_step_m: float = 1.0  # an end is the object's if the scan saw through this far beyond
     free_margin_m: float = 0.5  # ... it (the nearest return there this much farther, or none)
-    hull_spread_bins: int = 1  # ... in its bearing bin and this many aside (beams lie apart)
+    hull_spread_bins: int = 1  # ... for hull evidence, in its bearing bin and this many aside
     # Where the LiDARs sit, (x_m, y_m, height_m above the water) in the body frame: free
     # space is judged from each, the own hull's returns (in detection's hull box) cutting the
     # sight lines they stand in (a bow unit does not see the water behind the cabin). ()
@@ -808,13 +808,13 @@ def _real_ends(found: Clusters, b: int, axes, proj, lo_hi, cfg: TrackerConfig):
     """(2, 2) bool [axis, low/high end], twice. First: the end is the object's, not cut off
     by the crop (no corner within `edge_m` of it cut in its direction) and not hidden: the
     scan saw through the water `free_step_m` beyond its corners (those at the end itself: a
-    point beyond a corner of the side next to it would lie on the end's own face), with no
-    return in the `hull_spread_bins` either side of its bin either (a wall at a glancing
-    angle has its returns farther apart than the bins), and no segment through the cluster
-    reaches on beyond it. Second, for the hull evidence (`_Tracked.hull_hits`): the same,
-    but water beyond a corner in the cluster's own shadow (the far end of a hull seen from
-    its quarter) counts as seen through: nothing else hides it, where a piece of wall goes
-    on into the wall or behind a corner."""
+    point beyond a corner of the side next to it would lie on the end's own face), and no
+    segment through the cluster reaches on beyond it. Second, for the hull evidence
+    (`_Tracked.hull_hits`): the same, but water beyond a corner in the cluster's own
+    shadow (the far end of a hull seen from its quarter) counts as seen through: nothing
+    else hides it, where a piece of wall goes on into the wall or behind a corner; and
+    water is seen through only with no return in the `hull_spread_bins` either side of its
+    bin too (a wall at a glancing angle has its returns farther apart than the bins)."""
     hull, cut = found.hulls[b], found.cut[b]
     sign = np.array([-1.0, 1.0])
     inward = (proj.T[:, None, :] - lo_hi[:, :, None]) * sign[None, :, None]  # (2, 2, h)
@@ -822,14 +822,15 @@ def _real_ends(found: Clusters, b: int, axes, proj, lo_hi, cfg: TrackerConfig):
     real = ~((inward >= -cfg.edge_m) & cut_out).any(axis=2)
     i, j, h = np.nonzero(inward >= -_END_M)
     beyond = hull[h] + (sign[j] * cfg.free_step_m)[:, None] * axes[i]
-    # Water seen beyond it with no return in the bins either side either: a bin between
-    # two beams is empty on a wall seen at a glancing angle too (by one bin alone, the end
-    # of a quay's piece 50 m off, a unit's empty bin among two that saw the barge in
-    # front, passed for a hull's end: fuzz seed 1 case 39).
-    free = free_space(found, beyond, cfg.free_margin_m, cfg.hull_spread_bins)
+    free = free_space(found, beyond, cfg.free_margin_m)
     hidden = (np.bincount(2 * i + j, ~free, minlength=4) > 0).reshape(2, 2)
-    own = ~(np.bincount(2 * i + j, ~(free | _in_shadow(hull, beyond, found.pose)),
-                        minlength=4) > 0).reshape(2, 2) if not free.all() else ~hidden
+    # A hull's own end, seen without a return in the bins either side of the water beyond
+    # it: a bin between two beams is empty on a wall seen at a glancing angle too.
+    clear = free.copy()
+    if free.any():
+        clear[free] = free_space(found, beyond[free], cfg.free_margin_m, cfg.hull_spread_bins)
+    own = ~(np.bincount(2 * i + j, ~(clear | _in_shadow(hull, beyond, found.pose)),
+                        minlength=4) > 0).reshape(2, 2) if not clear.all() else ~hidden
     faces = found.faces[b] if found.faces else ()
     if len(faces):  # a face the line detector followed on beyond an end: it goes on there
         f = faces.reshape(-1, 2) @ axes.T  # (2f, 2)

@@ -30,15 +30,3 @@ def test_no_wall_track_over_a_second_and_one_id_per_vessel(path, tmp_path):
     tracking = run_scenario(scenario, tmp_path, plots=False).summary["tracking"]
     assert tracking["longest_wall_track_s"] <= 1.0, tracking
     assert max(tracking["id_switches"].values()) <= 1, tracking
-
-
-@pytest.mark.slow  # (about 30 s: the case's first 170 s)
-def test_a_quay_seen_at_a_glancing_angle_beyond_moored_boats_is_no_vessel(tmp_path):
-    """Fuzz seed 1 case 39: the quay beyond the moored boats, coming out of its sparse
-    returns as the boat came on, was a vessel moving along it for 31.5 s (from 124.6 s)."""
-    scenario = replace(load_scenario(
-        Path(__file__).parent / "regressions" / "quay_beyond_moored_boats_in_a_bend.toml"),
-        duration_s=170.0)
-    tracking = run_scenario(scenario, tmp_path, plots=False).summary["tracking"]
-    assert tracking["longest_wall_track_s"] <= 1.0, tracking
-    assert tracking["longest_false_vessel_s"] <= 1.0, tracking
