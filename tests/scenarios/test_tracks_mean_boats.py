@@ -4,8 +4,7 @@ vessel scenario file (vessel_crossing's launch track was once drawn onto the qua
 passes, 2.1 s, with two ids) and the workboat encounter (a 1.5 s track on the side canal's
 wall seen end-on while the boat waits at the crossing: at that glancing angle the wall's
 returns are farther apart than the bearing bins, and the water "seen" beyond its last
-return lay in an empty bin; an end now counts only with the bins either side empty too, as
-for the hull evidence); not yet met: the crowded
+return lay in an empty bin; the hull evidence now asks the bins either side); not yet met: the crowded
 encounters (vessels and moored boats a few metres apart make one cluster, whose tracks trade
 ids; in fuzz seed 1's first 200 cases, 31 of 285 vessels changed track id more than once)."""
 
