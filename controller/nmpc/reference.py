@@ -232,13 +232,20 @@ def reference_trajectory(path: WaypointPath, position, heading_rad: float, speed
     else:
         s, speed = _stopping(s0, speed_mps, stop_at_m, decel_mps2, t)
     xy, psi = path.at(s)  # leg headings, already continuous along the path
-    offset = offset_m(s) if callable(offset_m) else offset_m
+    slope = None
+    if not callable(offset_m):
+        offset = offset_m
+    elif heading_along_line:  # the line's slope too (1 m central), in one call
+        offset, ahead, behind = np.split(offset_m(np.concatenate([s, s + 0.5, s - 0.5])), 3)
+        slope = ahead - behind
+    else:
+        offset = offset_m(s)
     if (offset != 0.0) if isinstance(offset, (int, float)) else np.any(offset):  # (np.any
         # of a number costs ten times the comparison)
         xy = xy + np.asarray(offset, float)[..., None] * np.column_stack([-np.sin(psi),
                                                                           np.cos(psi)])
-        if heading_along_line and callable(offset_m):  # the line's slope (1 m central)
-            psi = psi + np.arctan((offset_m(s + 0.5) - offset_m(s - 0.5)) / 1.0)
+        if slope is not None:  # the heading along the line, not the leg's across its ramp
+            psi = psi + np.arctan(slope)
     vn, ve = float(current[0]), float(current[1])
     if vn or ve:
         across = -vn * np.sin(psi) + ve * np.cos(psi)  # to starboard of the leg
