@@ -74,8 +74,10 @@ def test_a_plan_breaking_its_rows_far_is_solved_again_from_the_reference(tmp_pat
     assert check_criteria(off, run_scenario(off, tmp_path / "off", plots=False).summary)
 
 
-HELD_BEHIND_A_KAYAK = REGRESSIONS / "boat_held_at_rest_behind_a_kayak_stopped_across_the_canal.toml"
-HELD_UNTIL_BACKING_OFF = REGRESSIONS / "boat_held_at_rest_until_it_backs_off_from_a_stopped_kayak.toml"
+HELD_BEHIND_A_KAYAK = (REGRESSIONS
+                       / "boat_held_at_rest_behind_a_kayak_stopped_across_the_canal.toml")
+HELD_UNTIL_BACKING_OFF = (REGRESSIONS
+                          / "boat_held_at_rest_until_it_backs_off_from_a_stopped_kayak.toml")
 
 
 @pytest.mark.slow  # (2 x 33 s: a whole fuzz case's run, twice; see LONG_RUNS)
@@ -260,9 +262,9 @@ def test_slowed_for_a_blind_opening_the_boat_still_goes_round_a_kayak_stopped_in
     boat came up behind the kayak at 0.1 m/s and, with the leg's heading across the
     reference's move over to the gap, stayed 10 m short of it to the time limit; with the
     heading along that line it goes round, 2 m and more off, and reaches the goal."""
-    scenario = with_options(load_scenario(
-        Path(__file__).parent / "encounters" / "drifting_kayak_at_a_junction_while_overtaking.toml"),
-        blind_speed_mps=0.5)
+    scenario = with_options(load_scenario(Path(__file__).parent / "encounters"
+                                          / "drifting_kayak_at_a_junction_while_overtaking.toml"),
+                            blind_speed_mps=0.5)
     summary = run_scenario(scenario, tmp_path, plots=False).summary
     failed = check_criteria(scenario, summary)
     assert not failed, "; ".join(failed)
